@@ -1,0 +1,173 @@
+//! The one error type of the core: small, `Copy`, and specific about what was found and
+//! what was expected.
+
+use core::fmt;
+
+/// Which cloud an error is about.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Cloud {
+    /// The CT template cloud (source).
+    Template,
+    /// The US target cloud.
+    Target,
+    /// Points handed to the mapping (waypoints or any other cloud).
+    Query,
+}
+
+/// Everything that can go wrong in the core. Every variant names what was found and,
+/// where it applies, what was expected.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Error {
+    /// A cloud has fewer points than the pipeline needs.
+    TooFewPoints {
+        /// Which cloud.
+        cloud: Cloud,
+        /// Points found.
+        found: u32,
+        /// Minimum accepted.
+        min: u32,
+    },
+    /// A cloud has more points than the core can index.
+    TooManyPoints {
+        /// Which cloud.
+        cloud: Cloud,
+        /// Points found.
+        found: u32,
+        /// Maximum accepted.
+        max: u32,
+    },
+    /// A coordinate is NaN or infinite.
+    NonFinite {
+        /// Which cloud.
+        cloud: Cloud,
+        /// Index of the offending point.
+        index: u32,
+    },
+    /// A coordinate is beyond [`crate::MAX_COORD_MM`] in magnitude.
+    OutOfRange {
+        /// Which cloud.
+        cloud: Cloud,
+        /// Index of the offending point.
+        index: u32,
+    },
+    /// The cloud has no 2-D extent (all points equal or on a line): no skeleton exists.
+    Degenerate {
+        /// Which cloud.
+        cloud: Cloud,
+        /// Second largest spread (standard deviation along the second principal axis), mm.
+        spread_mm: f32,
+    },
+    /// The label slice does not have one label per point.
+    LabelCount {
+        /// Labels given.
+        found: u32,
+        /// Points in the cloud.
+        expected: u32,
+    },
+    /// The skeleton tree does not show the rib endpoints the method needs on one side
+    /// of the sternum.
+    Endpoints {
+        /// Which cloud.
+        cloud: Cloud,
+        /// Side (0 = negative first principal axis, 1 = positive).
+        side: u8,
+        /// Endpoint candidates found on that side.
+        found: u8,
+        /// Endpoints needed per side (one per rib).
+        expected: u8,
+    },
+    /// The template's rib labels do not give each of ribs 2..5 exactly one endpoint per side.
+    RibOrder {
+        /// Side (0 or 1).
+        side: u8,
+        /// The rib number (2..=5) that is missing or repeated.
+        rib: u8,
+        /// How many endpoints on that side carry that rib's label.
+        found: u8,
+    },
+    /// Too few points are left on a rib path to fit its curve.
+    RibPath {
+        /// Which cloud.
+        cloud: Cloud,
+        /// Rib number 2..=5.
+        rib: u8,
+        /// Points left after the turn-angle filter.
+        found: u8,
+        /// Minimum needed (a line needs 2).
+        min: u8,
+    },
+    /// A rigid fit had no solution (coincident points) or failed its accuracy check.
+    RigidFit,
+    /// A fixed-capacity buffer is full; nothing was written past it.
+    Capacity {
+        /// The capacity that was reached.
+        capacity: u32,
+    },
+    /// A configuration value is out of its valid range.
+    Config(&'static str),
+}
+
+impl fmt::Display for Cloud {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Cloud::Template => "template",
+            Cloud::Target => "target",
+            Cloud::Query => "query",
+        })
+    }
+}
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Error::TooFewPoints { cloud, found, min } => {
+                write!(f, "{cloud} cloud has {found} points, at least {min} are needed")
+            }
+            Error::TooManyPoints { cloud, found, max } => {
+                write!(f, "{cloud} cloud has {found} points, at most {max} are accepted")
+            }
+            Error::NonFinite { cloud, index } => {
+                write!(f, "{cloud} point {index} has a NaN or infinite coordinate")
+            }
+            Error::OutOfRange { cloud, index } => write!(
+                f,
+                "{cloud} point {index} has a coordinate beyond ±{} mm",
+                crate::MAX_COORD_MM
+            ),
+            Error::Degenerate { cloud, spread_mm } => write!(
+                f,
+                "{cloud} cloud is degenerate: spread along its second axis is {spread_mm} mm, \
+                 a rib cage needs a 2-D extent"
+            ),
+            Error::LabelCount { found, expected } => {
+                write!(f, "{found} labels given for {expected} points")
+            }
+            Error::Endpoints { cloud, side, found, expected } => write!(
+                f,
+                "{cloud} skeleton shows {found} rib endpoints on side {side}, expected {expected} \
+                 (one per rib 2..5)"
+            ),
+            Error::RibOrder { side, rib, found } => write!(
+                f,
+                "template labels give rib {rib} {found} endpoints on side {side}, expected exactly 1"
+            ),
+            Error::RibPath { cloud, rib, found, min } => write!(
+                f,
+                "{cloud} rib {rib} path keeps {found} points after the turn-angle filter, \
+                 at least {min} are needed"
+            ),
+            Error::RigidFit => f.write_str(
+                "rigid fit failed: the point set is degenerate or the SVD failed its check",
+            ),
+            Error::Capacity { capacity } => write!(f, "buffer full at its capacity of {capacity}"),
+            Error::Config(what) => write!(f, "invalid configuration: {what}"),
+        }
+    }
+}
+
+impl core::error::Error for Error {}
+
+/// Result with the core's [`Error`].
+pub type Result<T> = core::result::Result<T, Error>;

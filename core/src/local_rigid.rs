@@ -1,0 +1,241 @@
+//! Skeleton-graph non-rigid mapping (paper Eq. 6): every point is moved by the rigid
+//! transform that best maps its `N_r` nearest template skeleton points onto their paired
+//! target skeleton points.
+//!
+//! # Collinear neighbourhoods
+//! Ten nearest points that lie almost on one line fix the rotation about that line only
+//! weakly, and noise then turns it wildly. The rule: the neighbourhood's spread across
+//! its main direction (standard deviation along its second principal axis) must be at
+//! least [`MIN_CROSS_SPREAD`] of the spread along it; while it is not, the neighbourhood
+//! is widened by the next-nearest skeleton point (up to all 30, whose spread always
+//! covers several ribs). The result is always a well-posed Kabsch problem.
+//!
+//! # Transform reuse
+//! A neighbourhood is a 30-bit set of skeleton indices. Points with the same set share
+//! one transform: it is fitted once and kept in a [`TransformCache`] (open addressing,
+//! fixed capacity). When the cache is full a transform is still computed, just not kept,
+//! and [`TransformCache::uncached`] counts it.
+
+use crate::error::{Error, Result};
+use crate::geom::Rigid;
+use crate::kabsch;
+use crate::skeleton::SKELETON_POINTS;
+use crate::Vec3;
+use nalgebra::{Matrix3, SymmetricEigen};
+
+/// Paper: `N_r = 10` nearest skeleton points per local transform.
+pub const NEIGHBOURS: usize = 10;
+/// Smallest accepted ratio (second / first principal spread) of a neighbourhood.
+pub const MIN_CROSS_SPREAD: f32 = 0.15;
+/// Default transform cache capacity (power of two). 128 entries × (4 B key + 48 B
+/// transform + index) ≈ 7.2 KiB. Points in an ordinary template share far fewer sets.
+pub const CACHE_CAPACITY: usize = 128;
+
+/// Fixed-capacity map from neighbourhood bit set to its fitted transform.
+pub struct TransformCache<const CAP: usize> {
+    map: heapless::index_map::FnvIndexMap<u32, Rigid, CAP>,
+    /// Transforms looked up and found.
+    pub hits: u32,
+    /// Transforms fitted.
+    pub fits: u32,
+    /// Transforms fitted but not kept because the cache was full.
+    pub uncached: u32,
+}
+
+impl<const CAP: usize> Default for TransformCache<CAP> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const CAP: usize> TransformCache<CAP> {
+    /// An empty cache.
+    pub const fn new() -> Self {
+        TransformCache { map: heapless::index_map::FnvIndexMap::new(), hits: 0, fits: 0, uncached: 0 }
+    }
+
+    /// Distinct neighbourhoods kept.
+    pub fn len(&self) -> usize {
+        self.map.len()
+    }
+
+    /// True when nothing is kept.
+    pub fn is_empty(&self) -> bool {
+        self.map.is_empty()
+    }
+}
+
+/// The 30 paired skeleton points and the mapping they define.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LocalRigid {
+    source: [Vec3; SKELETON_POINTS],
+    target: [Vec3; SKELETON_POINTS],
+    neighbours: usize,
+}
+
+impl LocalRigid {
+    /// Mapping from `source` (template skeleton) to `target` (target skeleton), `N_r =
+    /// neighbours` (3..=30).
+    pub fn new(source: [Vec3; SKELETON_POINTS], target: [Vec3; SKELETON_POINTS], neighbours: usize) -> Result<Self> {
+        if !(3..=SKELETON_POINTS).contains(&neighbours) {
+            return Err(Error::Config("N_r must be in 3..=30"));
+        }
+        Ok(LocalRigid { source, target, neighbours })
+    }
+
+    /// The neighbourhood of `p`: its `N_r` nearest source skeleton points, widened until
+    /// it is not collinear (see the module docs), as a bit set.
+    pub fn neighbourhood(&self, p: &Vec3) -> u32 {
+        let mut order: [(f32, u8); SKELETON_POINTS] =
+            core::array::from_fn(|i| ((self.source[i] - p).norm_squared(), i as u8));
+        order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let mut mask = 0u32;
+        for (k, &(_, i)) in order.iter().enumerate() {
+            mask |= 1 << i;
+            if k + 1 >= self.neighbours && !self.collinear(mask) {
+                break;
+            }
+        }
+        mask
+    }
+
+    fn collinear(&self, mask: u32) -> bool {
+        let mut sum = Vec3::zeros();
+        let mut n = 0.0;
+        for i in bits(mask) {
+            sum += self.source[i];
+            n += 1.0;
+        }
+        let mean = sum / n;
+        let mut cov = Matrix3::zeros();
+        for i in bits(mask) {
+            let d = self.source[i] - mean;
+            cov += d * d.transpose();
+        }
+        let mut ev = SymmetricEigen::new(cov / n).eigenvalues;
+        ev.as_mut_slice().sort_unstable_by(|a, b| b.total_cmp(a));
+        // Compare variances: (σ2/σ1)² < ratio².
+        ev[1] < MIN_CROSS_SPREAD * MIN_CROSS_SPREAD * ev[0]
+    }
+
+    /// Fits the rigid transform of a neighbourhood.
+    pub fn fit(&self, mask: u32) -> Result<Rigid> {
+        let mut a = heapless::Vec::<Vec3, SKELETON_POINTS>::new();
+        let mut b = heapless::Vec::<Vec3, SKELETON_POINTS>::new();
+        for i in bits(mask) {
+            // Note: at most 30 bits are set, the capacity.
+            let _ = a.push(self.source[i]);
+            let _ = b.push(self.target[i]);
+        }
+        kabsch::fit(&a, &b)
+    }
+
+    /// The transform for `p`, from the cache when its neighbourhood was seen before.
+    pub fn transform_for<const CAP: usize>(&self, p: &Vec3, cache: &mut TransformCache<CAP>) -> Result<Rigid> {
+        let mask = self.neighbourhood(p);
+        if let Some(t) = cache.map.get(&mask) {
+            cache.hits += 1;
+            return Ok(*t);
+        }
+        let t = self.fit(mask)?;
+        cache.fits += 1;
+        if cache.map.insert(mask, t).is_err() {
+            cache.uncached += 1;
+        }
+        Ok(t)
+    }
+
+    /// Maps one point.
+    pub fn map_point<const CAP: usize>(&self, p: &Vec3, cache: &mut TransformCache<CAP>) -> Result<Vec3> {
+        Ok(self.transform_for(p, cache)?.apply(p))
+    }
+
+    /// Maps points in place (any number: nothing is buffered). On error the points
+    /// before the failing one are mapped and the rest are untouched.
+    pub fn map_in_place<const CAP: usize>(&self, points: &mut [Vec3], cache: &mut TransformCache<CAP>) -> Result<()> {
+        for p in points {
+            *p = self.map_point(p, cache)?;
+        }
+        Ok(())
+    }
+
+    /// Template skeleton points.
+    pub fn source(&self) -> &[Vec3; SKELETON_POINTS] {
+        &self.source
+    }
+
+    /// Target skeleton points.
+    pub fn target(&self) -> &[Vec3; SKELETON_POINTS] {
+        &self.target
+    }
+}
+
+fn bits(mask: u32) -> impl Iterator<Item = usize> {
+    (0..32).filter(move |i| mask & (1 << i) != 0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Rotation3;
+
+    fn skeleton() -> [Vec3; SKELETON_POINTS] {
+        // Four curved "ribs" at different heights.
+        let mut out = [Vec3::zeros(); SKELETON_POINTS];
+        let mut k = 0;
+        for (r, n) in crate::skeleton::RIB_SAMPLES.iter().enumerate() {
+            for j in 0..*n {
+                let x = -100.0 + 200.0 * j as f32 / (*n - 1) as f32;
+                out[k] = Vec3::new(x, -28.0 * r as f32 - 0.002 * x * x, -0.004 * x * x);
+                k += 1;
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn rigid_motion_of_the_skeleton_moves_every_point_rigidly() {
+        let src = skeleton();
+        let rot = Rotation3::from_euler_angles(0.2, -0.3, 0.4);
+        let t = Vec3::new(5.0, -7.0, 30.0);
+        let dst = src.map(|p| rot * p + t);
+        let map = LocalRigid::new(src, dst, NEIGHBOURS).unwrap();
+        let mut cache = TransformCache::<CACHE_CAPACITY>::new();
+        for i in 0..200 {
+            let p = Vec3::new(i as f32 - 100.0, -(i % 90) as f32, (i % 7) as f32);
+            let q = map.map_point(&p, &mut cache).unwrap();
+            assert!((q - (rot * p + t)).norm() < 1e-3);
+        }
+        assert!(cache.hits > 0 && cache.fits as usize == cache.len());
+        assert_eq!(cache.hits + cache.fits, 200);
+    }
+
+    #[test]
+    fn collinear_neighbourhoods_are_widened() {
+        // Rib 5 is a straight line of 10 points far from the others.
+        let mut src = skeleton();
+        for (j, p) in src[20..].iter_mut().enumerate() {
+            *p = Vec3::new(-100.0 + 20.0 * j as f32, -400.0, 0.0);
+        }
+        let map = LocalRigid::new(src, src, NEIGHBOURS).unwrap();
+        let mask = map.neighbourhood(&Vec3::new(0.0, -400.0, 0.0));
+        assert!(mask.count_ones() > NEIGHBOURS as u32);
+        assert!(!map.collinear(mask));
+        // An ordinary point keeps exactly N_r.
+        assert_eq!(map.neighbourhood(&Vec3::new(0.0, -30.0, 0.0)).count_ones(), NEIGHBOURS as u32);
+    }
+
+    #[test]
+    fn full_cache_still_maps_and_counts() {
+        let src = skeleton();
+        let map = LocalRigid::new(src, src, NEIGHBOURS).unwrap();
+        let mut cache = TransformCache::<2>::new();
+        for i in 0..50 {
+            let p = Vec3::new(4.0 * i as f32 - 100.0, -2.0 * i as f32, 0.0);
+            assert!((map.map_point(&p, &mut cache).unwrap() - p).norm() < 1e-3);
+        }
+        assert_eq!(cache.len(), 2);
+        assert!(cache.uncached > 0);
+        assert!(LocalRigid::new(src, src, 2).is_err());
+    }
+}

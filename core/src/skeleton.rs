@@ -1,0 +1,339 @@
+//! Skeleton graph of one rib-cartilage cloud (paper III-C) and the 30 paired rib points.
+//!
+//! [`SkeletonGraph::build`]: SOM 1 (20 × 20) unifies the cloud to 400 points, SOM 2
+//! (5 × 8) reduces those to 40 key points, Prim's MST connects them, and the endpoint
+//! rule below picks the 8 rib endpoints. [`RibSkeleton::build`] then walks the tree path
+//! between each rib's two endpoints, keeps points by the turn-angle rule (Eq. 4), fits
+//! cubics and resamples them (Eq. 5).
+//!
+//! # Endpoint rule
+//! The paper takes "the key points forming the convex hull" as the eight endpoints but a
+//! hull may have more or fewer than eight vertices, and some vertices (the top and bottom
+//! of the sternum) are not rib ends. We use, in the coronal plane of the key points (first
+//! two principal axes `u`, `v`; `u` lateral):
+//! 1. the midline is the median `u` of the key points; side 0 is `u` below it, side 1 above;
+//! 2. candidates are tree leaves (degree 1) lying laterally: at least
+//!    [`LATERAL_FRACTION`] of that side's half-width away from the midline — this drops
+//!    the sternum's ends;
+//! 3. on each side, candidates are ranked by the length of the tree branch they end
+//!    (from the leaf to the first branching node): rib ends terminate long cartilage
+//!    chains, spurious leaves (a key point between two ribs) terminate short twigs; the
+//!    four longest are kept, a convex-hull vertex winning a tie;
+//! 4. if a side has fewer than four, the lateral convex-hull vertices of that side that
+//!    are not yet chosen are added, most lateral first (a rib whose chain was joined to a
+//!    neighbour at its lateral end still has its tip on the hull);
+//! 5. if a side still has fewer than four, [`Error::Endpoints`] names the side and count.
+//!
+//! # Rib order
+//! Template: each endpoint takes the rib label of the nearest labelled template point
+//! when labels are given ([`Error::RibOrder`] unless every rib gets exactly one endpoint
+//! per side); without labels, endpoints are ordered cranio-caudally on each side (the
+//! template is in the patient frame: `+y` cranial). Target: endpoints inherit the label
+//! of the template endpoint they are matched to (see [`crate::endpoints`]).
+
+use crate::error::{Cloud, Error, Result};
+use crate::fit::{equal_steps, Poly};
+use crate::geom::{Frame, Rigid};
+use crate::hull::{gift_wrap, Vec2};
+use crate::mst::Tree;
+use crate::som::{Som, SomConfig};
+use crate::Vec3;
+
+/// SOM 1 grid rows (paper: 20 × 20).
+pub const SOM1_ROWS: usize = 20;
+/// SOM 1 grid columns.
+pub const SOM1_COLS: usize = 20;
+/// SOM 2 grid rows (paper: 5 × 8).
+pub const SOM2_ROWS: usize = 5;
+/// SOM 2 grid columns.
+pub const SOM2_COLS: usize = 8;
+/// Skeleton key points: SOM 2 nodes.
+pub const KEY_POINTS: usize = SOM2_ROWS * SOM2_COLS;
+/// Ribs whose cartilage is registered.
+pub const RIBS: [u8; 4] = [2, 3, 4, 5];
+/// Resampled points per rib (paper: 6, 6, 8, 10).
+pub const RIB_SAMPLES: [usize; 4] = [6, 6, 8, 10];
+/// Paired skeleton points: 6 + 6 + 8 + 10.
+pub const SKELETON_POINTS: usize = 30;
+/// Fraction of a side's half-width a leaf must lie from the midline to be a rib end.
+pub const LATERAL_FRACTION: f32 = 0.35;
+/// Paper Eq. 4 threshold T_θ.
+pub const TURN_ANGLE_DEG: f32 = 60.0;
+
+const _: () = assert!(
+    RIB_SAMPLES[0] + RIB_SAMPLES[1] + RIB_SAMPLES[2] + RIB_SAMPLES[3] == SKELETON_POINTS
+);
+const _: () = assert!(KEY_POINTS <= crate::mst::MAX_TREE_NODES);
+
+/// The SOM / MST / endpoint stage of one cloud (≈ 5.7 KiB, see the crate docs).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SkeletonGraph {
+    /// SOM 1 nodes (400).
+    pub som1: Som<SOM1_ROWS, SOM1_COLS>,
+    /// SOM 2 nodes: the key points (40).
+    pub key_points: [Vec3; KEY_POINTS],
+    /// MST over the key points.
+    pub tree: Tree<KEY_POINTS>,
+    /// Principal axes of the key points (u lateral, v along the sternum).
+    pub frame: Frame,
+    /// Convex-hull vertices of the key points in the (u, v) plane, counter-clockwise.
+    pub hull: heapless::Vec<u16, KEY_POINTS>,
+    /// The four endpoints of each side (key-point indices), most cranial (+v) first.
+    pub endpoints: [[u8; 4]; 2],
+}
+
+impl SkeletonGraph {
+    /// SOM 1 → SOM 2 → MST → hull → endpoints for `cloud`. With `patient_frame` the
+    /// cloud is taken to be in the patient frame (x lateral, y cranial) and the axes are
+    /// oriented to it (used for the template); otherwise their signs are arbitrary.
+    pub fn build(
+        cloud: &[Vec3],
+        which: Cloud,
+        som1: &SomConfig,
+        som2: &SomConfig,
+        patient_frame: bool,
+    ) -> Result<Self> {
+        let frame0 = Frame::principal(cloud, som1.seed)
+            .ok_or(Error::TooFewPoints { cloud: which, found: 0, min: 1 })?;
+        if !(frame0.spread[1] >= MIN_SPREAD_MM) {
+            return Err(Error::Degenerate { cloud: which, spread_mm: frame0.spread[1] });
+        }
+        let som1 = Som::<SOM1_ROWS, SOM1_COLS>::train(cloud, &frame0, som1)?;
+        let frame1 = Frame::principal(som1.nodes(), som2.seed)
+            .ok_or(Error::Degenerate { cloud: which, spread_mm: 0.0 })?;
+        let som2 = Som::<SOM2_ROWS, SOM2_COLS>::train(som1.nodes(), &frame1, som2)?;
+        let mut key_points = [Vec3::zeros(); KEY_POINTS];
+        key_points.copy_from_slice(som2.nodes());
+        let tree = Tree::prim(&key_points)?;
+        let mut frame = Frame::principal(&key_points, 0)
+            .ok_or(Error::Degenerate { cloud: which, spread_mm: 0.0 })?;
+        if patient_frame {
+            frame = frame.oriented_to_patient();
+        }
+        let uv: [Vec2; KEY_POINTS] = core::array::from_fn(|i| {
+            let q = frame.local(&key_points[i]);
+            Vec2::new(q.x, q.y)
+        });
+        let mut hull = heapless::Vec::new();
+        gift_wrap(&uv, &mut hull)?;
+        let endpoints = select_endpoints(&key_points, &tree, &uv, &hull, which)?;
+        Ok(SkeletonGraph { som1, key_points, tree, frame, hull, endpoints })
+    }
+
+    /// Positions of the eight endpoints, side 0 then side 1.
+    pub fn endpoint_positions(&self) -> [Vec3; 8] {
+        core::array::from_fn(|k| self.key_points[usize::from(self.endpoints[k / 4][k % 4])])
+    }
+}
+
+/// A cloud whose second principal spread is below this (mm) has no rib-cage extent.
+pub const MIN_SPREAD_MM: f32 = 1.0;
+
+fn select_endpoints(
+    key: &[Vec3; KEY_POINTS],
+    tree: &Tree<KEY_POINTS>,
+    uv: &[Vec2; KEY_POINTS],
+    hull: &[u16],
+    which: Cloud,
+) -> Result<[[u8; 4]; 2]> {
+    let mut us: [f32; KEY_POINTS] = core::array::from_fn(|i| uv[i].x);
+    us.sort_unstable_by(f32::total_cmp);
+    let mid = 0.5 * (us[KEY_POINTS / 2 - 1] + us[KEY_POINTS / 2]);
+    let half = [mid - us[0], us[KEY_POINTS - 1] - mid];
+    let side_of = |i: usize| usize::from(uv[i].x > mid);
+    let lateral = |i: usize| {
+        let s = side_of(i);
+        (uv[i].x - mid).abs() >= LATERAL_FRACTION * half[s]
+    };
+    let on_hull = |i: usize| hull.iter().any(|&h| usize::from(h) == i);
+    let degrees = tree.degrees();
+
+    let mut out = [[0u8; 4]; 2];
+    for (side, slot) in out.iter_mut().enumerate() {
+        // (index, branch length, on hull) of lateral leaves on this side.
+        let mut cands = heapless::Vec::<(usize, f32, bool), KEY_POINTS>::new();
+        for i in 0..KEY_POINTS {
+            if degrees[i] == 1 && side_of(i) == side && lateral(i) {
+                // Note: at most KEY_POINTS entries, the capacity.
+                let _ = cands.push((i, tree.branch_length(i, key, &degrees), on_hull(i)));
+            }
+        }
+        cands.sort_unstable_by(|a, b| b.1.total_cmp(&a.1).then(b.2.cmp(&a.2)).then(a.0.cmp(&b.0)));
+        cands.truncate(4);
+        if cands.len() < 4 {
+            // Rule 4: lateral hull vertices, most lateral first.
+            let mut extra = heapless::Vec::<(usize, f32, bool), KEY_POINTS>::new();
+            for &h in hull {
+                let i = usize::from(h);
+                if side_of(i) == side && lateral(i) && !cands.iter().any(|c| c.0 == i) {
+                    let _ = extra.push((i, (uv[i].x - mid).abs(), true));
+                }
+            }
+            extra.sort_unstable_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+            for e in extra {
+                if cands.len() == 4 {
+                    break;
+                }
+                let _ = cands.push(e);
+            }
+        }
+        if cands.len() < 4 {
+            return Err(Error::Endpoints { cloud: which, side: side as u8, found: cands.len() as u8, expected: 4 });
+        }
+        // Most cranial (+v) first.
+        cands.sort_unstable_by(|a, b| uv[b.0].y.total_cmp(&uv[a.0].y));
+        for (k, c) in cands.iter().enumerate() {
+            slot[k] = c.0 as u8;
+        }
+    }
+    Ok(out)
+}
+
+/// For each rib 2..5 (index 0..4), its endpoint on side 0 and on side 1 (key-point indices).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RibEnds(pub [[u8; 2]; 4]);
+
+impl RibEnds {
+    /// Template rib order: from `labels` (rib number per cloud point; values other than
+    /// 2..=5 are ignored) when given, else cranio-caudal on each side.
+    pub fn from_template(graph: &SkeletonGraph, cloud: &[Vec3], labels: Option<&[u8]>) -> Result<Self> {
+        let Some(labels) = labels else {
+            // `endpoints` are already most cranial first.
+            let e = graph.endpoints;
+            return Ok(RibEnds(core::array::from_fn(|r| [e[0][r], e[1][r]])));
+        };
+        if labels.len() != cloud.len() {
+            return Err(Error::LabelCount {
+                found: crate::geom::sat_u32(labels.len()),
+                expected: crate::geom::sat_u32(cloud.len()),
+            });
+        }
+        let mut ends = [[u8::MAX; 2]; 4];
+        for side in 0..2 {
+            let mut count = [0u8; 4];
+            for &k in &graph.endpoints[side] {
+                let p = graph.key_points[usize::from(k)];
+                let rib = cloud
+                    .iter()
+                    .zip(labels)
+                    .filter(|(_, l)| RIBS.contains(l))
+                    .min_by(|a, b| (a.0 - p).norm_squared().total_cmp(&(b.0 - p).norm_squared()))
+                    .map(|(_, &l)| l)
+                    .ok_or(Error::RibOrder { side: side as u8, rib: RIBS[0], found: 0 })?;
+                let r = usize::from(rib - RIBS[0]);
+                count[r] += 1;
+                ends[r][side] = k;
+            }
+            if let Some(r) = count.iter().position(|&c| c != 1) {
+                return Err(Error::RibOrder { side: side as u8, rib: RIBS[r], found: count[r] });
+            }
+        }
+        Ok(RibEnds(ends))
+    }
+}
+
+/// The 30 resampled rib points of one cloud (paper Eq. 5), rib 2 first, each rib from
+/// side 0 to side 1, and what the turn filter kept.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RibSkeleton {
+    /// Resampled points: ribs 2, 3, 4, 5 with 6, 6, 8, 10 points.
+    pub points: [Vec3; SKELETON_POINTS],
+    /// Per rib, the key points kept on its path (up to 40, side 0 first).
+    pub paths: [heapless::Vec<u8, KEY_POINTS>; 4],
+    /// Per rib, the polynomial degree fitted (3 unless the path kept fewer than 4 points).
+    pub degree: [u8; 4],
+}
+
+impl RibSkeleton {
+    /// Paths, turn filter, fit and resampling for the rib `ends` of `graph`.
+    pub fn build(graph: &SkeletonGraph, ends: &RibEnds, turn_angle_deg: f32, which: Cloud) -> Result<Self> {
+        if !(turn_angle_deg > 0.0 && turn_angle_deg <= 180.0) {
+            return Err(Error::Config("turn angle must be in (0, 180] degrees"));
+        }
+        let cos_max = libm::cosf(turn_angle_deg.to_radians());
+        let mut points = [Vec3::zeros(); SKELETON_POINTS];
+        let mut paths: [heapless::Vec<u8, KEY_POINTS>; 4] = Default::default();
+        let mut degree = [0u8; 4];
+        let mut offset = 0;
+        for (r, [a, b]) in ends.0.iter().enumerate() {
+            let mut raw = heapless::Vec::<u8, KEY_POINTS>::new();
+            graph.tree.path(usize::from(*a), usize::from(*b), &mut raw)?;
+            turn_filter(&graph.key_points, &raw, cos_max, &mut paths[r]);
+            let kept = &paths[r];
+            if kept.len() < 2 {
+                return Err(Error::RibPath { cloud: which, rib: RIBS[r], found: kept.len() as u8, min: 2 });
+            }
+            let local: heapless::Vec<Vec3, KEY_POINTS> =
+                kept.iter().map(|&k| graph.frame.local(&graph.key_points[usize::from(k)])).collect();
+            let xs: heapless::Vec<f32, KEY_POINTS> = local.iter().map(|q| q.x).collect();
+            let ys: heapless::Vec<f32, KEY_POINTS> = local.iter().map(|q| q.y).collect();
+            let zs: heapless::Vec<f32, KEY_POINTS> = local.iter().map(|q| q.z).collect();
+            let deg = (kept.len() - 1).min(3);
+            let fy = Poly::fit(&xs, &ys, deg)
+                .map_err(|_| Error::RibPath { cloud: which, rib: RIBS[r], found: kept.len() as u8, min: 2 })?;
+            let fz = Poly::fit(&xs, &zs, deg)
+                .map_err(|_| Error::RibPath { cloud: which, rib: RIBS[r], found: kept.len() as u8, min: 2 })?;
+            degree[r] = deg as u8;
+            let (x0, x1) = (xs[0], xs[xs.len() - 1]);
+            for (k, x) in equal_steps(x0, x1, RIB_SAMPLES[r]).enumerate() {
+                points[offset + k] = graph.frame.world(&Vec3::new(x, fy.eval(x), fz.eval(x)));
+            }
+            offset += RIB_SAMPLES[r];
+        }
+        Ok(RibSkeleton { points, paths, degree })
+    }
+
+    /// The skeleton moved by a rigid transform (for tests and diagnostics).
+    pub fn transformed(&self, t: &Rigid) -> Self {
+        let mut s = self.clone();
+        for p in &mut s.points {
+            *p = t.apply(p);
+        }
+        s
+    }
+}
+
+/// Paper Eq. 4: keep the first two path points, then a point only if the turn from the
+/// last kept segment to it is at most T_θ. A point coinciding with the last kept one is
+/// dropped (no direction).
+pub fn turn_filter<const N: usize>(pts: &[Vec3], path: &[u8], cos_max: f32, out: &mut heapless::Vec<u8, N>) {
+    out.clear();
+    for &k in path {
+        let p = pts[usize::from(k)];
+        let n = out.len();
+        let keep = match n {
+            0 => true,
+            1 => (p - pts[usize::from(out[0])]).norm_squared() > 0.0,
+            _ => {
+                let a = pts[usize::from(out[n - 1])] - pts[usize::from(out[n - 2])];
+                let b = p - pts[usize::from(out[n - 1])];
+                let (na, nb) = (a.norm(), b.norm());
+                nb > 0.0 && na > 0.0 && a.dot(&b) >= cos_max * na * nb
+            }
+        };
+        if keep && out.push(k).is_err() {
+            return;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn turn_filter_follows_eq4() {
+        // A straight run, a 90° kink point, then back on the line.
+        let pts = [
+            Vec3::new(0., 0., 0.),
+            Vec3::new(1., 0., 0.),
+            Vec3::new(2., 0., 0.),
+            Vec3::new(2., 5., 0.), // 90° turn from (1,0)->(2,0): dropped
+            Vec3::new(3., 0.5, 0.), // small turn from the last kept segment: kept
+            Vec3::new(3., 0.5, 0.), // coincident: dropped
+        ];
+        let mut out = heapless::Vec::<u8, 8>::new();
+        turn_filter(&pts, &[0, 1, 2, 3, 4, 5], libm::cosf(60f32.to_radians()), &mut out);
+        assert_eq!(out.as_slice(), &[0, 1, 2, 4]);
+    }
+}

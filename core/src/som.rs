@@ -1,0 +1,210 @@
+//! Kohonen self-organising map on a rectangular `R × C` grid (paper Eq. 2).
+//!
+//! Training, for iteration `i = 0..T`:
+//! 1. draw a sample `P(k)` with the seeded [`Rng`] (`k = rng.below(n)`);
+//! 2. find the best matching unit (BMU): the node nearest to `P(k)`;
+//! 3. update every node within the cut-off of the BMU on the grid:
+//!    `W += θ(BMU, i) · lr(i) · (P(k) − W)` with the Gaussian neighbourhood
+//!    `θ = exp(−d² / (2σ(i)²))`, `d` the grid distance to the BMU.
+//!
+//! Radius and learning rate decay geometrically from their start to their end value:
+//! `σ(i) = σ₀ (σ₁/σ₀)^(i/(T−1))`, likewise `lr(i)`. Nodes with `d > 3σ(i)` are not
+//! touched (`θ < 0.012` there), so late iterations cost little more than the BMU search.
+//! The Gaussian is separable, `θ = g(dr) g(dc)`, so one iteration evaluates `R + C`
+//! exponentials instead of `R · C`.
+//!
+//! Initialisation is linear: nodes spread evenly over `±2σ` of the cloud's first two
+//! principal axes (columns along the first), which makes the result independent of how
+//! the cloud is posed and needs no random start.
+
+use crate::error::{Error, Result};
+use crate::geom::Frame;
+use crate::rng::Rng;
+use crate::Vec3;
+
+/// Training schedule of one SOM.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SomConfig {
+    /// Number of samples drawn (iterations).
+    pub iterations: u32,
+    /// Learning rate at the first iteration.
+    pub lr_start: f32,
+    /// Learning rate at the last iteration.
+    pub lr_end: f32,
+    /// Neighbourhood radius σ at the first iteration, in grid units.
+    pub radius_start: f32,
+    /// Neighbourhood radius σ at the last iteration, in grid units.
+    pub radius_end: f32,
+    /// Seed of the sampling sequence.
+    pub seed: u64,
+}
+
+impl SomConfig {
+    /// Paper SOM 1 (20 × 20): unifies a cloud to 400 evenly spread points.
+    pub const SOM1: SomConfig = SomConfig {
+        iterations: 6000,
+        lr_start: 0.5,
+        lr_end: 0.01,
+        radius_start: 6.0,
+        radius_end: 0.5,
+        seed: 0x5EED_0001,
+    };
+    /// Paper SOM 2 (5 × 8): 40 skeleton key points from the SOM-1 output.
+    pub const SOM2: SomConfig = SomConfig {
+        iterations: 3000,
+        lr_start: 0.5,
+        lr_end: 0.01,
+        radius_start: 3.0,
+        radius_end: 0.3,
+        seed: 0x5EED_0002,
+    };
+
+    fn check(&self) -> Result<()> {
+        let ok = self.iterations >= 1
+            && self.lr_start > 0.0
+            && self.lr_start <= 1.0
+            && self.lr_end > 0.0
+            && self.lr_end <= 1.0
+            && self.radius_start > 0.0
+            && self.radius_end > 0.0
+            && self.radius_start.is_finite()
+            && self.radius_end.is_finite();
+        if ok {
+            Ok(())
+        } else {
+            Err(Error::Config("SOM needs iterations >= 1, learning rates in (0, 1], radii > 0"))
+        }
+    }
+}
+
+/// A trained (or initialised) map: `R` rows of `C` nodes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Som<const R: usize, const C: usize> {
+    nodes: [[Vec3; C]; R],
+}
+
+impl<const R: usize, const C: usize> Som<R, C> {
+    /// Trains a map on `points` (any non-empty size; nothing is copied) with `frame` the
+    /// principal axes of `points` (for the linear initialisation).
+    pub fn train(points: &[Vec3], frame: &Frame, cfg: &SomConfig) -> Result<Self> {
+        cfg.check()?;
+        if points.is_empty() || R == 0 || C == 0 {
+            return Err(Error::Config("SOM needs a non-empty grid and cloud"));
+        }
+        let n = u32::try_from(points.len()).map_err(|_| Error::Config("cloud too large"))?;
+        let mut som = Self::linear_init(frame);
+        let mut rng = Rng::new(cfg.seed);
+        let mut g_row = [0.0f32; R];
+        let mut g_col = [0.0f32; C];
+        let last = (cfg.iterations - 1).max(1) as f32;
+        let radius_ratio = libm::logf(cfg.radius_end / cfg.radius_start);
+        let lr_ratio = libm::logf(cfg.lr_end / cfg.lr_start);
+        for i in 0..cfg.iterations {
+            let t = i as f32 / last;
+            let sigma = cfg.radius_start * libm::expf(radius_ratio * t);
+            let lr = cfg.lr_start * libm::expf(lr_ratio * t);
+            let p = points[rng.below(n) as usize];
+            let (br, bc) = som.bmu(&p);
+            let reach = libm::ceilf(3.0 * sigma) as usize;
+            let inv = -0.5 / (sigma * sigma);
+            let (r0, r1) = (br.saturating_sub(reach), (br + reach).min(R - 1));
+            let (c0, c1) = (bc.saturating_sub(reach), (bc + reach).min(C - 1));
+            for r in r0..=r1 {
+                let d = r.abs_diff(br) as f32;
+                g_row[r] = libm::expf(inv * d * d);
+            }
+            for c in c0..=c1 {
+                let d = c.abs_diff(bc) as f32;
+                g_col[c] = lr * libm::expf(inv * d * d);
+            }
+            for r in r0..=r1 {
+                for c in c0..=c1 {
+                    let w = &mut som.nodes[r][c];
+                    *w += (p - *w) * (g_row[r] * g_col[c]);
+                }
+            }
+        }
+        Ok(som)
+    }
+
+    /// Nodes spread evenly over ±2σ of the first two principal axes.
+    pub fn linear_init(frame: &Frame) -> Self {
+        let span = |k: usize, of: usize| {
+            if of <= 1 {
+                0.0
+            } else {
+                2.0 * (k as f32 / (of - 1) as f32) - 1.0
+            }
+        };
+        let e1 = frame.axes.column(0) * (2.0 * frame.spread[0]);
+        let e2 = frame.axes.column(1) * (2.0 * frame.spread[1]);
+        let nodes = core::array::from_fn(|r| {
+            core::array::from_fn(|c| frame.origin + e1 * span(c, C) + e2 * span(r, R))
+        });
+        Som { nodes }
+    }
+
+    /// Grid position (row, column) of the node nearest to `p`; ties go to the first.
+    pub fn bmu(&self, p: &Vec3) -> (usize, usize) {
+        let mut best = (0, 0);
+        let mut best_d = f32::INFINITY;
+        for (r, row) in self.nodes.iter().enumerate() {
+            for (c, w) in row.iter().enumerate() {
+                let d = (w - p).norm_squared();
+                if d < best_d {
+                    best_d = d;
+                    best = (r, c);
+                }
+            }
+        }
+        best
+    }
+
+    /// All nodes, row after row.
+    pub fn nodes(&self) -> &[Vec3] {
+        self.nodes.as_flattened()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A filled 200 × 80 mm sheet sampled every 4 mm.
+    fn sheet() -> heapless::Vec<Vec3, 1071> {
+        (0..51 * 21).map(|i| Vec3::new(4.0 * (i % 51) as f32 - 100.0, 4.0 * (i / 51) as f32 - 40.0, 5.0)).collect()
+    }
+
+    #[test]
+    fn same_seed_same_map_and_nodes_land_on_the_data() {
+        let pts = sheet();
+        let frame = Frame::principal(&pts, 1).unwrap();
+        let cfg = SomConfig { iterations: 4000, ..SomConfig::SOM2 };
+        let a = Som::<5, 8>::train(&pts, &frame, &cfg).unwrap();
+        let b = Som::<5, 8>::train(&pts, &frame, &cfg).unwrap();
+        assert_eq!(a, b);
+        let c = Som::<5, 8>::train(&pts, &frame, &SomConfig { seed: 9, ..cfg }).unwrap();
+        assert_ne!(a, c);
+        // Every node ends on the sheet, and the map spreads over it: the nodes cover
+        // its corners to within a grid cell of the 5 × 8 map (25 × 20 mm).
+        for w in a.nodes() {
+            let d = crate::geom::nearest(&pts, w).unwrap().1.sqrt();
+            assert!(d < 3.0, "node {w:?} is {d} mm off the data");
+        }
+        for corner in [Vec3::new(-100.0, -40.0, 5.0), Vec3::new(100.0, 40.0, 5.0)] {
+            let d = crate::geom::nearest(a.nodes(), &corner).unwrap().1.sqrt();
+            assert!(d < 25.0, "corner {corner:?} is {d} mm from the map");
+        }
+    }
+
+    #[test]
+    fn rejects_bad_schedules() {
+        let pts = sheet();
+        let frame = Frame::principal(&pts, 1).unwrap();
+        let bad = SomConfig { iterations: 0, ..SomConfig::SOM2 };
+        assert!(matches!(Som::<5, 8>::train(&pts, &frame, &bad), Err(Error::Config(_))));
+        let bad = SomConfig { lr_start: f32::NAN, ..SomConfig::SOM2 };
+        assert!(matches!(Som::<5, 8>::train(&pts, &frame, &bad), Err(Error::Config(_))));
+        assert!(matches!(Som::<5, 8>::train(&[], &frame, &SomConfig::SOM2), Err(Error::Config(_))));
+    }
+}
