@@ -71,8 +71,8 @@ pub fn match_endpoints(target: &SkeletonGraph, template: &SkeletonGraph, ends: &
 }
 
 fn coarse_pose(
-    src: &[Vec3; KEY_POINTS],
-    dst: &[Vec3; KEY_POINTS],
+    src: &[Vec3],
+    dst: &[Vec3],
     src_graph: &SkeletonGraph,
     dst_graph: &SkeletonGraph,
 ) -> Result<(Rigid, f32)> {
@@ -101,7 +101,7 @@ fn coarse_pose(
 }
 
 /// Point-to-point ICP of `src` onto `dst` from `pose`; returns the pose and final RMS.
-fn icp(src: &[Vec3; KEY_POINTS], dst: &[Vec3; KEY_POINTS], mut pose: Rigid) -> Result<(Rigid, f32)> {
+fn icp(src: &[Vec3], dst: &[Vec3], mut pose: Rigid) -> Result<(Rigid, f32)> {
     let mut rms = f32::INFINITY;
     for _ in 0..COARSE_ITERATIONS {
         let mut paired = [Vec3::zeros(); KEY_POINTS];
@@ -112,8 +112,8 @@ fn icp(src: &[Vec3; KEY_POINTS], dst: &[Vec3; KEY_POINTS], mut pose: Rigid) -> R
             *q = dst[j];
             sum += d2;
         }
-        rms = libm::sqrtf(sum / KEY_POINTS as f32);
-        pose = kabsch::fit(src, &paired)?;
+        rms = libm::sqrtf(sum / src.len().max(1) as f32);
+        pose = kabsch::fit(src, &paired[..src.len()])?;
     }
     Ok((pose, rms))
 }

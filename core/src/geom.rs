@@ -50,7 +50,8 @@ pub const PCA_SAMPLE: usize = 2048;
 
 impl Frame {
     /// Principal axes of `points` (all of them if at most [`PCA_SAMPLE`], else a seeded
-    /// sample). Returns `None` for an empty slice.
+    /// sample), signs fixed by the third moments (see the code). Returns `None` for an
+    /// empty slice.
     pub fn principal(points: &[Vec3], seed: u64) -> Option<Frame> {
         let first = *points.first()?;
         let n = points.len();
@@ -84,9 +85,25 @@ impl Frame {
             axes.set_column(col, &eig.eigenvectors.column(k));
             spread[col] = libm::sqrtf(eig.eigenvalues[k].max(0.0));
         }
-        // Right-handed: third axis = first × second.
-        let third = axes.column(0).cross(&axes.column(1));
-        axes.set_column(2, &third);
+        // Canonical signs: the second and third axes point toward the long tail of the
+        // distribution (positive third moment), the first completes a right-handed frame.
+        // A rotated copy of a cloud thus gets rotated axes, whatever the eigen-solver's
+        // signs, and anything initialised from the frame (the SOM grid) rotates with it.
+        let mut skew = [0.0f32; 3];
+        let mut rng = Rng::new(seed);
+        for k in 0..take {
+            let d = axes.transpose() * (pick(&mut rng, k) - origin);
+            for (s, v) in skew.iter_mut().zip(d.iter()) {
+                *s += v * v * v;
+            }
+        }
+        for col in [1, 2] {
+            if skew[col] < 0.0 {
+                axes.set_column(col, &(-axes.column(col)));
+            }
+        }
+        let first = axes.column(1).cross(&axes.column(2));
+        axes.set_column(0, &first);
         Some(Frame { origin, axes, spread })
     }
 

@@ -11,35 +11,37 @@ use crate::Vec3;
 /// Largest tree (node indices are `u8`).
 pub const MAX_TREE_NODES: usize = 255;
 
-/// A spanning tree over `N` points stored as parent links (node 0 is the root).
+/// A spanning tree over up to `N` points stored as parent links (node 0 is the root).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Tree<const N: usize> {
     parent: [u8; N],
+    len: usize,
 }
 
 impl<const N: usize> Tree<N> {
-    /// Prim's MST of `points` rooted at point 0. Ties between equal edges go to the lower
-    /// index, so the tree is deterministic.
-    pub fn prim(points: &[Vec3; N]) -> Result<Self> {
-        if N == 0 || N > MAX_TREE_NODES {
-            return Err(Error::Config("tree size must be 1..=255"));
+    /// Prim's MST of `points` (1..=N of them, N ≤ 255) rooted at point 0. Ties between
+    /// equal edges go to the lower index, so the tree is deterministic.
+    pub fn prim(points: &[Vec3]) -> Result<Self> {
+        let n = points.len();
+        if n == 0 || n > N || N > MAX_TREE_NODES {
+            return Err(Error::Config("tree size must be 1..=N, N <= 255"));
         }
         let mut parent = [0u8; N];
         let mut best = [f32::INFINITY; N];
         let mut done = [false; N];
         best[0] = 0.0;
-        for _ in 0..N {
+        for _ in 0..n {
             // Cheapest node not yet in the tree.
             let mut u = usize::MAX;
             let mut bu = f32::INFINITY;
-            for v in 0..N {
+            for v in 0..n {
                 if !done[v] && (u == usize::MAX || best[v] < bu) {
                     u = v;
                     bu = best[v];
                 }
             }
             done[u] = true;
-            for v in 0..N {
+            for v in 0..n {
                 if !done[v] {
                     let d = (points[u] - points[v]).norm();
                     if d < best[v] {
@@ -49,7 +51,17 @@ impl<const N: usize> Tree<N> {
                 }
             }
         }
-        Ok(Tree { parent })
+        Ok(Tree { parent, len: n })
+    }
+
+    /// Number of nodes.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// True for a tree without nodes (never built by [`Tree::prim`]).
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
     }
 
     /// Parent of `v` (the root is its own parent).
@@ -57,13 +69,13 @@ impl<const N: usize> Tree<N> {
         usize::from(self.parent[v])
     }
 
-    /// The `N − 1` edges as (child, parent) pairs, in node order.
+    /// The `len − 1` edges as (child, parent) pairs, in node order.
     pub fn edges(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
-        (1..N).map(|v| (v, self.parent(v)))
+        (1..self.len).map(|v| (v, self.parent(v)))
     }
 
-    /// Total Euclidean length of the tree.
-    pub fn weight(&self, points: &[Vec3; N]) -> f32 {
+    /// Total Euclidean length of the tree over the `points` it was built on.
+    pub fn weight(&self, points: &[Vec3]) -> f32 {
         self.edges().map(|(a, b)| (points[a] - points[b]).norm()).sum()
     }
 
@@ -89,7 +101,7 @@ impl<const N: usize> Tree<N> {
     /// The unique tree path from `a` to `b`, both included, written into `out`.
     pub fn path(&self, a: usize, b: usize, out: &mut heapless::Vec<u8, N>) -> Result<()> {
         out.clear();
-        if a >= N || b >= N {
+        if a >= self.len || b >= self.len {
             return Err(Error::Config("path end is not a tree node"));
         }
         let (mut x, mut y) = (a, b);
@@ -123,7 +135,7 @@ impl<const N: usize> Tree<N> {
 
     /// Length along the tree from leaf `v` to the first node with degree ≠ 2 (a branch
     /// point or another leaf): how long the branch ending in `v` is.
-    pub fn branch_length(&self, v: usize, points: &[Vec3; N], degrees: &[u8; N]) -> f32 {
+    pub fn branch_length(&self, v: usize, points: &[Vec3], degrees: &[u8; N]) -> f32 {
         let (mut prev, mut cur) = (usize::MAX, v);
         let mut len = 0.0;
         for _ in 0..N {
@@ -142,7 +154,7 @@ impl<const N: usize> Tree<N> {
     /// Neighbours of `v` in the tree.
     pub fn neighbours(&self, v: usize) -> impl Iterator<Item = usize> + '_ {
         let up = (v != 0).then(|| self.parent(v));
-        up.into_iter().chain((1..N).filter(move |&w| self.parent(w) == v))
+        up.into_iter().chain((1..self.len).filter(move |&w| self.parent(w) == v))
     }
 }
 
@@ -153,7 +165,7 @@ mod tests {
     #[test]
     fn line_of_points_gives_a_chain() {
         let pts: [Vec3; 6] = core::array::from_fn(|i| Vec3::new([0., 5., 1., 4., 2., 3.][i], 0., 0.));
-        let t = Tree::prim(&pts).unwrap();
+        let t = Tree::<6>::prim(&pts).unwrap();
         assert!((t.weight(&pts) - 5.0).abs() < 1e-6);
         let deg = t.degrees();
         assert_eq!(deg.iter().filter(|&&d| d == 1).count(), 2);
@@ -175,9 +187,11 @@ mod tests {
             Vec3::new(0., 0., -1.5),
             Vec3::new(0., 0., -3.),
         ];
-        let t = Tree::prim(&pts).unwrap();
+        let t = Tree::<8>::prim(&pts).unwrap();
         let deg = t.degrees();
-        assert_eq!(deg, [3, 1, 1, 2, 1]);
+        assert_eq!(deg, [3, 1, 1, 2, 1, 0, 0, 0]);
+        assert!(Tree::<4>::prim(&pts).is_err());
+        assert!(Tree::<4>::prim(&[]).is_err());
         assert!((t.branch_length(4, &pts, &deg) - 3.0).abs() < 1e-6);
         assert!((t.branch_length(2, &pts, &deg) - 2.0).abs() < 1e-6);
         let mut path = heapless::Vec::new();

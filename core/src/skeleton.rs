@@ -68,10 +68,10 @@ const _: () = assert!(KEY_POINTS <= crate::mst::MAX_TREE_NODES);
 /// The SOM / MST / endpoint stage of one cloud (≈ 5.7 KiB, see the crate docs).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SkeletonGraph {
-    /// SOM 1 nodes (400).
-    pub som1: Som<SOM1_ROWS, SOM1_COLS>,
-    /// SOM 2 nodes: the key points (40).
-    pub key_points: [Vec3; KEY_POINTS],
+    /// Live SOM 1 nodes (at most 400; see [`Som::live_nodes`]).
+    pub som1: heapless::Vec<Vec3, { SOM1_ROWS * SOM1_COLS }>,
+    /// Live SOM 2 nodes: the key points (at most 40).
+    pub key_points: heapless::Vec<Vec3, KEY_POINTS>,
     /// MST over the key points.
     pub tree: Tree<KEY_POINTS>,
     /// Principal axes of the key points (u lateral, v along the sternum).
@@ -98,26 +98,34 @@ impl SkeletonGraph {
         if !(frame0.spread[1] >= MIN_SPREAD_MM) {
             return Err(Error::Degenerate { cloud: which, spread_mm: frame0.spread[1] });
         }
-        let som1 = Som::<SOM1_ROWS, SOM1_COLS>::train(cloud, &frame0, som1)?;
-        let frame1 = Frame::principal(som1.nodes(), som2.seed)
+        let map1 = Som::<SOM1_ROWS, SOM1_COLS>::train(cloud, &frame0, som1)?;
+        let mut live1 = heapless::Vec::new();
+        map1.live_nodes(cloud, som1.seed, &mut live1)?;
+        let frame1 = Frame::principal(&live1, som2.seed)
             .ok_or(Error::Degenerate { cloud: which, spread_mm: 0.0 })?;
-        let som2 = Som::<SOM2_ROWS, SOM2_COLS>::train(som1.nodes(), &frame1, som2)?;
-        let mut key_points = [Vec3::zeros(); KEY_POINTS];
-        key_points.copy_from_slice(som2.nodes());
+        let map2 = Som::<SOM2_ROWS, SOM2_COLS>::train(&live1, &frame1, som2)?;
+        let mut key_points = heapless::Vec::new();
+        map2.live_nodes(&live1, som2.seed, &mut key_points)?;
+        if key_points.len() < MIN_KEY_POINTS {
+            return Err(Error::Endpoints { cloud: which, side: 0, found: 0, expected: 4 });
+        }
         let tree = Tree::prim(&key_points)?;
         let mut frame = Frame::principal(&key_points, 0)
             .ok_or(Error::Degenerate { cloud: which, spread_mm: 0.0 })?;
         if patient_frame {
             frame = frame.oriented_to_patient();
         }
-        let uv: [Vec2; KEY_POINTS] = core::array::from_fn(|i| {
-            let q = frame.local(&key_points[i]);
-            Vec2::new(q.x, q.y)
-        });
+        let uv: heapless::Vec<Vec2, KEY_POINTS> = key_points
+            .iter()
+            .map(|p| {
+                let q = frame.local(p);
+                Vec2::new(q.x, q.y)
+            })
+            .collect();
         let mut hull = heapless::Vec::new();
         gift_wrap(&uv, &mut hull)?;
         let endpoints = select_endpoints(&key_points, &tree, &uv, &hull, which)?;
-        Ok(SkeletonGraph { som1, key_points, tree, frame, hull, endpoints })
+        Ok(SkeletonGraph { som1: live1, key_points, tree, frame, hull, endpoints })
     }
 
     /// Positions of the eight endpoints, side 0 then side 1.
@@ -126,20 +134,24 @@ impl SkeletonGraph {
     }
 }
 
+/// Fewest live key points from which 8 endpoints and 4 paths can come.
+pub const MIN_KEY_POINTS: usize = 12;
+
 /// A cloud whose second principal spread is below this (mm) has no rib-cage extent.
 pub const MIN_SPREAD_MM: f32 = 1.0;
 
 fn select_endpoints(
-    key: &[Vec3; KEY_POINTS],
+    key: &[Vec3],
     tree: &Tree<KEY_POINTS>,
-    uv: &[Vec2; KEY_POINTS],
+    uv: &[Vec2],
     hull: &[u16],
     which: Cloud,
 ) -> Result<[[u8; 4]; 2]> {
-    let mut us: [f32; KEY_POINTS] = core::array::from_fn(|i| uv[i].x);
+    let n = key.len();
+    let mut us: heapless::Vec<f32, KEY_POINTS> = uv.iter().map(|q| q.x).collect();
     us.sort_unstable_by(f32::total_cmp);
-    let mid = 0.5 * (us[KEY_POINTS / 2 - 1] + us[KEY_POINTS / 2]);
-    let half = [mid - us[0], us[KEY_POINTS - 1] - mid];
+    let mid = if n % 2 == 0 { 0.5 * (us[n / 2 - 1] + us[n / 2]) } else { us[n / 2] };
+    let half = [mid - us[0], us[n - 1] - mid];
     let side_of = |i: usize| usize::from(uv[i].x > mid);
     let lateral = |i: usize| {
         let s = side_of(i);
@@ -152,7 +164,7 @@ fn select_endpoints(
     for (side, slot) in out.iter_mut().enumerate() {
         // (index, branch length, on hull) of lateral leaves on this side.
         let mut cands = heapless::Vec::<(usize, f32, bool), KEY_POINTS>::new();
-        for i in 0..KEY_POINTS {
+        for i in 0..n {
             if degrees[i] == 1 && side_of(i) == side && lateral(i) {
                 // Note: at most KEY_POINTS entries, the capacity.
                 let _ = cands.push((i, tree.branch_length(i, key, &degrees), on_hull(i)));

@@ -22,6 +22,9 @@ use crate::geom::Frame;
 use crate::rng::Rng;
 use crate::Vec3;
 
+/// Points (at most) checked when finding the live nodes of a map.
+pub const LIVE_SAMPLES: usize = 4096;
+
 /// Training schedule of one SOM.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SomConfig {
@@ -46,7 +49,7 @@ impl SomConfig {
         lr_start: 0.5,
         lr_end: 0.01,
         radius_start: 6.0,
-        radius_end: 0.5,
+        radius_end: 0.3,
         seed: 0x5EED_0001,
     };
     /// Paper SOM 2 (5 × 8): 40 skeleton key points from the SOM-1 output.
@@ -55,7 +58,7 @@ impl SomConfig {
         lr_start: 0.5,
         lr_end: 0.01,
         radius_start: 3.0,
-        radius_end: 0.3,
+        radius_end: 0.1,
         seed: 0x5EED_0002,
     };
 
@@ -158,6 +161,30 @@ impl<const R: usize, const C: usize> Som<R, C> {
             }
         }
         best
+    }
+
+    /// The nodes that are the best matching unit of at least one of `points` (all of
+    /// them when at most [`LIVE_SAMPLES`], else a seeded sample of that size), row after
+    /// row, into `out`. Nodes that win no point are the "dead units" a grid leaves in the
+    /// gaps between separate structures (between two ribs): they lie on no surface.
+    pub fn live_nodes<const M: usize>(&self, points: &[Vec3], seed: u64, out: &mut heapless::Vec<Vec3, M>) -> Result<()> {
+        out.clear();
+        let mut hit = [[false; C]; R];
+        let n = points.len();
+        let mut rng = Rng::new(seed);
+        for k in 0..n.min(LIVE_SAMPLES) {
+            let p = if n <= LIVE_SAMPLES { points[k] } else { points[rng.below(crate::geom::sat_u32(n)) as usize] };
+            let (r, c) = self.bmu(&p);
+            hit[r][c] = true;
+        }
+        for (row, hits) in self.nodes.iter().zip(&hit) {
+            for (w, &h) in row.iter().zip(hits) {
+                if h {
+                    out.push(*w).map_err(|_| Error::Capacity { capacity: M as u32 })?;
+                }
+            }
+        }
+        Ok(())
     }
 
     /// All nodes, row after row.
