@@ -34,7 +34,7 @@ impl Poly {
         let hi = x.iter().copied().fold(f32::NEG_INFINITY, f32::max);
         let center = 0.5 * (lo + hi);
         let half_range = 0.5 * (hi - lo);
-        if !(half_range > 0.0) || !half_range.is_finite() {
+        if !half_range.is_finite() || half_range <= 0.0 {
             return Err(Error::Config("polynomial fit needs distinct abscissae"));
         }
         let m = degree + 1;

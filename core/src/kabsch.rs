@@ -37,7 +37,7 @@ pub fn fit(a: &[Vec3], b: &[Vec3]) -> Result<Rigid> {
         h += (p - ca) * (q - cb).transpose();
     }
     let scale = h.abs().max();
-    if !(scale > f32::MIN_POSITIVE) {
+    if !scale.is_finite() || scale <= f32::MIN_POSITIVE {
         return Err(Error::RigidFit);
     }
     // Normalise H: the rotation does not depend on its scale, and the check gets easier.

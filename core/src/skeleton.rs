@@ -95,7 +95,7 @@ impl SkeletonGraph {
     ) -> Result<Self> {
         let frame0 = Frame::principal(cloud, som1.seed)
             .ok_or(Error::TooFewPoints { cloud: which, found: 0, min: 1 })?;
-        if !(frame0.spread[1] >= MIN_SPREAD_MM) {
+        if frame0.spread[1].is_nan() || frame0.spread[1] < MIN_SPREAD_MM {
             return Err(Error::Degenerate { cloud: which, spread_mm: frame0.spread[1] });
         }
         let map1 = Som::<SOM1_ROWS, SOM1_COLS>::train(cloud, &frame0, som1)?;
@@ -221,9 +221,9 @@ impl RibEnds {
             });
         }
         let mut ends = [[u8::MAX; 2]; 4];
-        for side in 0..2 {
+        for (side, side_ends) in graph.endpoints.iter().enumerate() {
             let mut count = [0u8; 4];
-            for &k in &graph.endpoints[side] {
+            for &k in side_ends {
                 let p = graph.key_points[usize::from(k)];
                 let rib = cloud
                     .iter()
@@ -259,7 +259,7 @@ pub struct RibSkeleton {
 impl RibSkeleton {
     /// Paths, turn filter, fit and resampling for the rib `ends` of `graph`.
     pub fn build(graph: &SkeletonGraph, ends: &RibEnds, turn_angle_deg: f32, which: Cloud) -> Result<Self> {
-        if !(turn_angle_deg > 0.0 && turn_angle_deg <= 180.0) {
+        if turn_angle_deg.is_nan() || turn_angle_deg <= 0.0 || turn_angle_deg > 180.0 {
             return Err(Error::Config("turn angle must be in (0, 180] degrees"));
         }
         let cos_max = libm::cosf(turn_angle_deg.to_radians());

@@ -112,18 +112,17 @@ impl<const R: usize, const C: usize> Som<R, C> {
             let inv = -0.5 / (sigma * sigma);
             let (r0, r1) = (br.saturating_sub(reach), (br + reach).min(R - 1));
             let (c0, c1) = (bc.saturating_sub(reach), (bc + reach).min(C - 1));
-            for r in r0..=r1 {
+            for (r, g) in g_row.iter_mut().enumerate().take(r1 + 1).skip(r0) {
                 let d = r.abs_diff(br) as f32;
-                g_row[r] = libm::expf(inv * d * d);
+                *g = libm::expf(inv * d * d);
             }
-            for c in c0..=c1 {
+            for (c, g) in g_col.iter_mut().enumerate().take(c1 + 1).skip(c0) {
                 let d = c.abs_diff(bc) as f32;
-                g_col[c] = lr * libm::expf(inv * d * d);
+                *g = lr * libm::expf(inv * d * d);
             }
-            for r in r0..=r1 {
-                for c in c0..=c1 {
-                    let w = &mut som.nodes[r][c];
-                    *w += (p - *w) * (g_row[r] * g_col[c]);
+            for (row, gr) in som.nodes[r0..=r1].iter_mut().zip(&g_row[r0..=r1]) {
+                for (w, gc) in row[c0..=c1].iter_mut().zip(&g_col[c0..=c1]) {
+                    *w += (p - *w) * (gr * gc);
                 }
             }
         }

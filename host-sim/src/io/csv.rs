@@ -1,0 +1,188 @@
+//! Point lists as CSV: header `x,y,z`, then one point per line, mm.
+
+use std::path::Path;
+
+use super::{check_points, content_lines, excerpt, parse_point, read_bytes, text, write_atomic};
+use super::{FormatError, IoError, Location};
+
+/// Parse a CSV point list.
+///
+/// The first non-blank line must be the header `x,y,z` (whitespace around the
+/// fields and CRLF endings tolerated, as is a leading UTF-8 byte-order mark).
+/// Every further non-blank line must hold exactly three comma-separated finite
+/// numbers. A header with no points gives an empty list; whether that is
+/// acceptable is the caller's decision.
+///
+/// # Errors
+///
+/// [`IoError::Format`] (without a path) naming the line (counted from 1): a
+/// missing or different header, a line without exactly three values, a value
+/// that is not a number, a non-finite value.
+pub fn parse_points_csv(text: &str) -> Result<Vec<[f64; 3]>, IoError> {
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let mut lines = content_lines(text, 1);
+    match lines.next() {
+        Some((_, header)) if header.split(',').map(str::trim).eq(["x", "y", "z"]) => {}
+        Some((n, found)) => {
+            return Err(IoError::format(
+                FormatError::CsvHeader(excerpt(found)),
+                Some(Location::Line(n)),
+            ))
+        }
+        None => return Err(FormatError::CsvHeader(String::new()).into()),
+    }
+    lines
+        .map(|(n, line)| {
+            let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+            parse_point(&fields).map_err(|kind| IoError::format(kind, Some(Location::Line(n))))
+        })
+        .collect()
+}
+
+/// Read a CSV point list from `path`; see [`parse_points_csv`].
+///
+/// # Errors
+///
+/// [`IoError::Io`] if the file cannot be read; [`IoError::Format`] with the path
+/// attached if it is not UTF-8 or [`parse_points_csv`] rejects it.
+pub fn read_points_csv(path: &Path) -> Result<Vec<[f64; 3]>, IoError> {
+    let bytes = read_bytes(path)?;
+    text(&bytes, 1)
+        .and_then(parse_points_csv)
+        .map_err(|e| e.with_path(path))
+}
+
+/// Write `points` to `path` as CSV (`x,y,z` header, shortest round-trip number
+/// formatting), atomically. An empty list writes just the header.
+///
+/// # Errors
+///
+/// With `path` left untouched: [`IoError::Format`] for a non-finite coordinate
+/// (naming the point); [`IoError::Io`] if the file cannot be written.
+pub fn write_points_csv(path: &Path, points: &[[f64; 3]]) -> Result<(), IoError> {
+    if !points.is_empty() {
+        check_points(points, "point").map_err(|e| e.with_path(path))?;
+    }
+    write_atomic(path, |out| {
+        writeln!(out, "x,y,z")?;
+        for p in points {
+            writeln!(out, "{},{},{}", p[0], p[1], p[2])?;
+        }
+        Ok(())
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn message(text: &str) -> String {
+        parse_points_csv(text).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn parses_with_crlf_blank_lines_and_spaces() {
+        let text = "\u{feff}\r\n  x , y,z  \r\n1,2,3\r\n\r\n -0.5 , 1e-3,4.25\r\n\n";
+        assert_eq!(
+            parse_points_csv(text).unwrap(),
+            vec![[1.0, 2.0, 3.0], [-0.5, 0.001, 4.25]]
+        );
+        assert_eq!(parse_points_csv("x,y,z\n").unwrap(), Vec::<[f64; 3]>::new());
+    }
+
+    #[test]
+    fn header_errors() {
+        assert_eq!(message(""), "expected header \"x,y,z\", found end of file");
+        assert_eq!(
+            message("\n \n"),
+            "expected header \"x,y,z\", found end of file"
+        );
+        assert_eq!(
+            message("1,2,3\n"),
+            "line 1: expected header \"x,y,z\", found \"1,2,3\""
+        );
+        assert_eq!(
+            message("\nx,y\n"),
+            "line 2: expected header \"x,y,z\", found \"x,y\""
+        );
+        assert_eq!(
+            message("X,Y,Z\n"),
+            "line 1: expected header \"x,y,z\", found \"X,Y,Z\""
+        );
+    }
+
+    #[test]
+    fn line_errors_name_the_line() {
+        let cases = [
+            ("x,y,z\n1,2,3\n4,5\n", "line 3: expected 3 numbers, found 2"),
+            ("x,y,z\n1,2,3,4\n", "line 2: expected 3 numbers, found 4"),
+            ("x,y,z\n\n\n1;2;3\n", "line 4: expected 3 numbers, found 1"),
+            ("x,y,z\n1,a,3\n", "line 2: \"a\" is not a number"),
+            (
+                "x,y,z\n1,,3\n",
+                "line 2: empty value where a number was expected",
+            ),
+            ("x,y,z\n1,2,NaN\n", "line 2: coordinate is not finite"),
+            (
+                "x,y,z\n1,2,3\r\n-inf,2,3\r\n",
+                "line 3: coordinate is not finite",
+            ),
+        ];
+        for (text, expected) in cases {
+            assert_eq!(message(text), expected, "{text:?}");
+        }
+    }
+
+    #[test]
+    fn round_trip_is_exact_and_atomic() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("wp.csv");
+        let points = vec![[0.1, -0.0, 1.0 / 3.0], [1e-7, 123456.75, -42.0]];
+        write_points_csv(&path, &points).unwrap();
+        assert_eq!(
+            std::fs::read_to_string(&path).unwrap(),
+            format!("x,y,z\n0.1,-0,{}\n0.0000001,123456.75,-42\n", 1.0 / 3.0)
+        );
+        let back = read_points_csv(&path).unwrap();
+        let bits = |p: &[[f64; 3]]| p.iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&back), bits(&points));
+
+        write_points_csv(&path, &[]).unwrap();
+        assert_eq!(read_points_csv(&path).unwrap(), Vec::<[f64; 3]>::new());
+
+        let e = write_points_csv(&path, &[[1.0, f64::INFINITY, 0.0]]).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            format!("{}: point 0: coordinate is not finite", path.display())
+        );
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "x,y,z\n");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+
+        let nowhere = dir.path().join("nope").join("wp.csv");
+        assert!(matches!(
+            write_points_csv(&nowhere, &points),
+            Err(IoError::Io { .. })
+        ));
+        assert!(!nowhere.exists());
+    }
+
+    #[test]
+    fn read_errors_name_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("WP.csv");
+        std::fs::write(&path, b"x,y,z\n1,2,3\n\xff\n").unwrap();
+        assert_eq!(
+            read_points_csv(&path).unwrap_err().to_string(),
+            format!("{}: line 3: text is not valid UTF-8", path.display())
+        );
+        std::fs::write(&path, "x,y,z\n1,2\n").unwrap();
+        assert_eq!(
+            read_points_csv(&path).unwrap_err().to_string(),
+            format!("{}: line 2: expected 3 numbers, found 2", path.display())
+        );
+        let missing = dir.path().join("none.csv");
+        let e = read_points_csv(&missing).unwrap_err();
+        assert_eq!(e.path(), Some(missing.as_path()));
+        assert!(e.kind().is_none());
+    }
+}

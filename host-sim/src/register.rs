@@ -1,0 +1,328 @@
+//! `ribreg register`: read the template and target clouds, register, map the template
+//! (and waypoints), write the results and a JSON report.
+//!
+//! Clouds of any size are handled without down-sampling: the core trains its SOMs on
+//! seeded samples of the borrowed cloud and maps points one at a time, so memory grows
+//! only with the clouds themselves (measured: 200,000 + 200,000 points register in well
+//! under a second, see the README).
+
+use crate::io::{self, Cloud, IoError, PlyFormat};
+use ribreg_core::error::Cloud as Which;
+use ribreg_core::local_rigid::TransformCache;
+use ribreg_core::metrics::{compare, Metrics};
+use ribreg_core::pipeline::{register, Config, Registration, Template};
+use ribreg_core::skeleton::{RIBS, RIB_SAMPLES};
+use ribreg_core::{Error, Vec3, MAX_COORD_MM};
+use serde_json::{json, Value};
+use std::fmt;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Transform cache capacity on the host (distinct 10-neighbour sets kept).
+pub const HOST_CACHE: usize = 1024;
+
+/// Inputs and outputs of one `register` run.
+#[derive(Clone, Debug, Default)]
+pub struct RegisterJob {
+    /// CT template cloud (PLY, optional `label`).
+    pub template: PathBuf,
+    /// US target cloud (PLY).
+    pub target: PathBuf,
+    /// Planned waypoints on the template (CSV `x,y,z`).
+    pub waypoints: Option<PathBuf>,
+    /// Registered template cloud (PLY, same order as the template).
+    pub out: PathBuf,
+    /// Mapped waypoints (CSV).
+    pub out_waypoints: Option<PathBuf>,
+    /// JSON report.
+    pub report: Option<PathBuf>,
+    /// Write the output PLY as ASCII instead of binary little-endian.
+    pub ascii: bool,
+}
+
+/// Why a command failed: one line for stderr.
+#[derive(Debug)]
+pub enum CliError {
+    /// Reading or writing a file failed.
+    Io(IoError),
+    /// The core refused the data.
+    Core(Error),
+    /// Arguments that cannot work together.
+    Usage(String),
+}
+
+impl fmt::Display for CliError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            CliError::Io(e) => write!(f, "{e}"),
+            CliError::Core(e) => write!(f, "{e}"),
+            CliError::Usage(s) => f.write_str(s),
+        }
+    }
+}
+
+impl std::error::Error for CliError {}
+
+impl From<IoError> for CliError {
+    fn from(e: IoError) -> Self {
+        CliError::Io(e)
+    }
+}
+
+impl From<Error> for CliError {
+    fn from(e: Error) -> Self {
+        CliError::Core(e)
+    }
+}
+
+/// f64 file points → core points, with the range check done in f64 (so 1e300 is "out of
+/// range", not "infinite after the cast").
+pub fn to_core(points: &[[f64; 3]], which: Which) -> Result<Vec<Vec3>, Error> {
+    points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let index = u32::try_from(i).unwrap_or(u32::MAX);
+            if p.iter().any(|c| !c.is_finite()) {
+                Err(Error::NonFinite { cloud: which, index })
+            } else if p.iter().any(|c| c.abs() > f64::from(MAX_COORD_MM)) {
+                Err(Error::OutOfRange { cloud: which, index })
+            } else {
+                Ok(Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32))
+            }
+        })
+        .collect()
+}
+
+/// Core points → f64 file points.
+pub fn to_file(points: &[Vec3]) -> Vec<[f64; 3]> {
+    points.iter().map(|p| [f64::from(p.x), f64::from(p.y), f64::from(p.z)]).collect()
+}
+
+/// PLY labels → core labels: 0 (unlabelled), 1 (sternum) or a rib 2..=5.
+pub fn to_core_labels(path: &Path, labels: &Option<Vec<i32>>) -> Result<Option<Vec<u8>>, CliError> {
+    let Some(labels) = labels else { return Ok(None) };
+    labels
+        .iter()
+        .enumerate()
+        .map(|(i, &l)| {
+            u8::try_from(l).ok().filter(|l| *l <= 5).ok_or_else(|| {
+                CliError::Usage(format!(
+                    "{}: vertex {i}: label {l} is not a rib number 2..5 (1 = sternum, 0 = unlabelled)",
+                    path.display()
+                ))
+            })
+        })
+        .collect::<Result<Vec<u8>, _>>()
+        .map(Some)
+}
+
+/// What a run produced (also written into the report).
+#[derive(Clone, Debug)]
+pub struct RegisterOutcome {
+    /// Registered template points (template order).
+    pub registered: Vec<Vec3>,
+    /// Mapped waypoints, if waypoints were given.
+    pub waypoints: Option<Vec<Vec3>>,
+    /// ED / HD of the registered template against the target.
+    pub metrics: Metrics,
+    /// The JSON report.
+    pub report: Value,
+}
+
+/// Registers already-loaded clouds (no file I/O): the shared core of `register` and
+/// `demo`. `progress` receives one line per stage.
+pub fn register_clouds(
+    template: &[Vec3],
+    labels: Option<&[u8]>,
+    target: &[Vec3],
+    waypoints: Option<&[Vec3]>,
+    cfg: &Config,
+    progress: &mut dyn FnMut(&str),
+) -> Result<RegisterOutcome, Error> {
+    let t0 = Instant::now();
+    let tpl = Template::build(template, labels, cfg)?;
+    let t_template = t0.elapsed();
+    progress(&format!(
+        "template: {} points -> {} SOM-1 nodes, {} key points, 30 skeleton points ({:.1} ms)",
+        template.len(),
+        tpl.graph.som1.len(),
+        tpl.graph.key_points.len(),
+        ms(t_template)
+    ));
+    let t1 = Instant::now();
+    let reg = register(&tpl, target, cfg)?;
+    let t_register = t1.elapsed();
+    progress(&format!(
+        "target: {} points -> skeleton, endpoints matched (rms {:.1} mm) ({:.1} ms)",
+        target.len(),
+        reg.matching.endpoint_rms,
+        ms(t_register)
+    ));
+    let t2 = Instant::now();
+    let mut cache = Box::new(TransformCache::<HOST_CACHE>::new());
+    let mut registered = template.to_vec();
+    reg.map.map_in_place(&mut registered, &mut cache)?;
+    let mapped_wp = match waypoints {
+        Some(w) => {
+            let mut w = w.to_vec();
+            reg.map.map_in_place(&mut w, &mut cache)?;
+            Some(w)
+        }
+        None => None,
+    };
+    let t_map = t2.elapsed();
+    progress(&format!(
+        "mapped {} points with {} local transforms ({:.1} ms)",
+        registered.len() + mapped_wp.as_ref().map_or(0, Vec::len),
+        cache.fits,
+        ms(t_map)
+    ));
+    let t3 = Instant::now();
+    let metrics = compare(&mut registered.clone(), &mut target.to_vec());
+    let t_metrics = t3.elapsed();
+    progress(&format!(
+        "ED {:.2} ± {:.2} mm (max {:.2}), HD {:.2} mm ({:.1} ms)",
+        metrics.ed.mean,
+        metrics.ed.sd,
+        metrics.ed.max,
+        metrics.hausdorff,
+        ms(t_metrics)
+    ));
+    let report = json!({
+        "version": 1,
+        "template": { "points": template.len(), "labelled": labels.is_some() },
+        "target": { "points": target.len() },
+        "skeleton": skeleton_json(&tpl, &reg),
+        "endpoint_match": {
+            "coarse_rms_mm": reg.matching.coarse_rms,
+            "endpoint_rms_mm": reg.matching.endpoint_rms,
+            "rotation_deg": reg.matching.pose.angle_deg(),
+            "rotation": rows(&reg.matching.pose.rotation),
+            "translation": reg.matching.pose.translation.as_slice(),
+        },
+        "metrics": {
+            "ed_mean_mm": metrics.ed.mean,
+            "ed_sd_mm": metrics.ed.sd,
+            "ed_max_mm": metrics.ed.max,
+            "hausdorff_mm": metrics.hausdorff,
+        },
+        "mapping": {
+            "neighbourhoods": cache.len(),
+            "fits": cache.fits,
+            "cache_hits": cache.hits,
+            "uncached": cache.uncached,
+            "waypoints": mapped_wp.as_ref().map_or(0, Vec::len),
+        },
+        "timings_ms": {
+            "template": ms(t_template),
+            "register": ms(t_register),
+            "map": ms(t_map),
+            "metrics": ms(t_metrics),
+        },
+    });
+    Ok(RegisterOutcome { registered, waypoints: mapped_wp, metrics, report })
+}
+
+fn skeleton_json(tpl: &Template, reg: &Registration) -> Value {
+    let pts = |p: &[Vec3]| p.iter().map(|v| [v.x, v.y, v.z]).collect::<Vec<_>>();
+    let mut offset = 0;
+    let ribs: Vec<Value> = RIBS
+        .iter()
+        .zip(RIB_SAMPLES)
+        .enumerate()
+        .map(|(r, (rib, n))| {
+            let v = json!({
+                "rib": rib,
+                "samples": n,
+                "first": offset,
+                "template_path_kept": tpl.skeleton.paths[r].len(),
+                "target_path_kept": reg.skeleton.paths[r].len(),
+                "template_degree": tpl.skeleton.degree[r],
+                "target_degree": reg.skeleton.degree[r],
+            });
+            offset += n;
+            v
+        })
+        .collect();
+    json!({
+        "template": pts(&tpl.skeleton.points),
+        "target": pts(&reg.skeleton.points),
+        "ribs": ribs,
+    })
+}
+
+fn rows(m: &nalgebra::Matrix3<f32>) -> Vec<[f32; 3]> {
+    (0..3).map(|r| [m[(r, 0)], m[(r, 1)], m[(r, 2)]]).collect()
+}
+
+fn ms(d: std::time::Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+/// Runs `ribreg register`. Nothing is written unless everything succeeded; outputs
+/// written before a failing one are removed again.
+pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<RegisterOutcome, CliError> {
+    let outputs: Vec<&PathBuf> =
+        [Some(&job.out), job.out_waypoints.as_ref(), job.report.as_ref()].into_iter().flatten().collect();
+    if job.out_waypoints.is_some() && job.waypoints.is_none() {
+        return Err(CliError::Usage("--out-waypoints needs --waypoints".into()));
+    }
+    for (i, a) in outputs.iter().enumerate() {
+        if outputs[..i].contains(a) || [&job.template, &job.target].contains(a) {
+            return Err(CliError::Usage(format!("{}: used twice (inputs and outputs must differ)", a.display())));
+        }
+    }
+    let t0 = Instant::now();
+    let template: Cloud = io::read_ply(&job.template)?;
+    let target: Cloud = io::read_ply(&job.target)?;
+    let waypoints = job.waypoints.as_deref().map(io::read_points_csv).transpose()?;
+    let labels = to_core_labels(&job.template, &template.labels)?;
+    let tpl = to_core(&template.points, Which::Template)?;
+    let tgt = to_core(&target.points, Which::Target)?;
+    let wps = waypoints.as_deref().map(|w| to_core(w, Which::Query)).transpose()?;
+    if let Some(w) = &waypoints {
+        if w.is_empty() {
+            return Err(CliError::Usage(format!(
+                "{}: no waypoints (only the header)",
+                job.waypoints.as_deref().unwrap_or(Path::new("")).display()
+            )));
+        }
+    }
+    let t_read = t0.elapsed();
+    progress(&format!("read {} template and {} target points ({:.1} ms)", tpl.len(), tgt.len(), ms(t_read)));
+    let mut outcome = register_clouds(&tpl, labels.as_deref(), &tgt, wps.as_deref(), &Config::default(), progress)?;
+    let t1 = Instant::now();
+    let mut written: Vec<&Path> = Vec::new();
+    let result = (|| -> Result<(), CliError> {
+        let out = Cloud { points: to_file(&outcome.registered), labels: template.labels.clone() };
+        let format = if job.ascii { PlyFormat::Ascii } else { PlyFormat::BinaryLittleEndian };
+        io::write_ply(&job.out, &out, format)?;
+        written.push(&job.out);
+        if let (Some(path), Some(w)) = (&job.out_waypoints, &outcome.waypoints) {
+            io::write_points_csv(path, &to_file(w))?;
+            written.push(path);
+        }
+        if let Some(path) = &job.report {
+            outcome.report["files"] = json!({
+                "template": job.template, "target": job.target, "waypoints": job.waypoints,
+                "out": job.out, "out_waypoints": job.out_waypoints,
+            });
+            outcome.report["timings_ms"]["read"] = json!(ms(t_read));
+            outcome.report["timings_ms"]["total_before_write"] = json!(ms(t0.elapsed()));
+            let text = serde_json::to_string_pretty(&outcome.report)
+                .map_err(|e| CliError::Usage(format!("report: {e}")))?;
+            io::write_text(path, &text)?;
+            written.push(path);
+        }
+        Ok(())
+    })();
+    if let Err(e) = result {
+        for p in written {
+            let _ = std::fs::remove_file(p);
+        }
+        return Err(e);
+    }
+    progress(&format!("wrote outputs ({:.1} ms)", ms(t1.elapsed())));
+    Ok(outcome)
+}
