@@ -46,7 +46,8 @@ pub fn match_endpoints(target: &SkeletonGraph, template: &SkeletonGraph, ends: &
     let (coarse, coarse_rms) = coarse_pose(&target.key_points, &template.key_points, target, template)?;
     // Template endpoints in slot order k = 2·rib + side.
     let ct: [Vec3; 8] = core::array::from_fn(|k| template.key_points[usize::from(ends.0[k / 2][k % 2])]);
-    let us_idx: [u8; 8] = core::array::from_fn(|k| target.endpoints[k / 4][k % 4]);
+    let found = target.endpoints?;
+    let us_idx: [u8; 8] = core::array::from_fn(|k| found[k / 4][k % 4]);
     let us: [Vec3; 8] = us_idx.map(|i| target.key_points[usize::from(i)]);
     let mut pose = coarse;
     let mut assign = [u8::MAX; 8];

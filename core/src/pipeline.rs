@@ -5,7 +5,7 @@ use crate::endpoints::{match_endpoints, EndpointMatch};
 use crate::error::{Cloud, Result};
 use crate::geom::validate;
 use crate::local_rigid::{LocalRigid, NEIGHBOURS};
-use crate::skeleton::{RibEnds, RibSkeleton, SkeletonGraph, TURN_ANGLE_DEG};
+use crate::skeleton::{RibEnds, RibSkeleton, SkeletonGraph, TreeWeight, TURN_ANGLE_DEG};
 use crate::som::SomConfig;
 use crate::Vec3;
 
@@ -26,6 +26,8 @@ pub struct Config {
     pub turn_angle_deg: f32,
     /// N_r of Eq. 6.
     pub neighbours: usize,
+    /// Edge weights of the key-point tree.
+    pub tree: TreeWeight,
 }
 
 impl Default for Config {
@@ -35,6 +37,7 @@ impl Default for Config {
             som2: SomConfig::SOM2,
             turn_angle_deg: TURN_ANGLE_DEG,
             neighbours: NEIGHBOURS,
+            tree: TreeWeight::Euclidean,
         }
     }
 }
@@ -57,7 +60,7 @@ impl Template {
     /// when given.
     pub fn build(cloud: &[Vec3], labels: Option<&[u8]>, cfg: &Config) -> Result<Self> {
         validate(cloud, Cloud::Template, MIN_CLOUD_POINTS, MAX_CLOUD_POINTS)?;
-        let graph = SkeletonGraph::build(cloud, Cloud::Template, &cfg.som1, &cfg.som2, true)?;
+        let graph = SkeletonGraph::build(cloud, Cloud::Template, cfg, true)?;
         let ends = RibEnds::from_template(&graph, cloud, labels)?;
         let skeleton = RibSkeleton::build(&graph, &ends, cfg.turn_angle_deg, Cloud::Template)?;
         Ok(Template { graph, ends, skeleton })
@@ -81,7 +84,7 @@ pub struct Registration {
 /// Map points through the result with [`LocalRigid::map_in_place`] on `.map`.
 pub fn register(template: &Template, target: &[Vec3], cfg: &Config) -> Result<Registration> {
     validate(target, Cloud::Target, MIN_CLOUD_POINTS, MAX_CLOUD_POINTS)?;
-    let graph = SkeletonGraph::build(target, Cloud::Target, &cfg.som1, &cfg.som2, false)?;
+    let graph = SkeletonGraph::build(target, Cloud::Target, cfg, false)?;
     let matching = match_endpoints(&graph, &template.graph, &template.ends)?;
     let skeleton = RibSkeleton::build(&graph, &matching.ends, cfg.turn_angle_deg, Cloud::Target)?;
     let map = LocalRigid::new(template.skeleton.points, skeleton.points, cfg.neighbours)?;

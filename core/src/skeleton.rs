@@ -36,7 +36,8 @@ use crate::fit::{equal_steps, Poly};
 use crate::geom::{Frame, Rigid};
 use crate::hull::{gift_wrap, Vec2};
 use crate::mst::Tree;
-use crate::som::{Som, SomConfig};
+use crate::pipeline::Config;
+use crate::som::Som;
 use crate::Vec3;
 
 /// SOM 1 grid rows (paper: 20 × 20).
@@ -78,21 +79,19 @@ pub struct SkeletonGraph {
     pub frame: Frame,
     /// Convex-hull vertices of the key points in the (u, v) plane, counter-clockwise.
     pub hull: heapless::Vec<u16, KEY_POINTS>,
-    /// The four endpoints of each side (key-point indices), most cranial (+v) first.
-    pub endpoints: [[u8; 4]; 2],
+    /// Median `u` of the key points: the midline separating side 0 (below) from side 1.
+    pub midline: f32,
+    /// The endpoint rule's four endpoints of each side (key-point indices), most cranial
+    /// (+v) first, or why the rule found fewer. A labelled template does not need them.
+    pub endpoints: Result<[[u8; 4]; 2]>,
 }
 
 impl SkeletonGraph {
     /// SOM 1 → SOM 2 → MST → hull → endpoints for `cloud`. With `patient_frame` the
     /// cloud is taken to be in the patient frame (x lateral, y cranial) and the axes are
     /// oriented to it (used for the template); otherwise their signs are arbitrary.
-    pub fn build(
-        cloud: &[Vec3],
-        which: Cloud,
-        som1: &SomConfig,
-        som2: &SomConfig,
-        patient_frame: bool,
-    ) -> Result<Self> {
+    pub fn build(cloud: &[Vec3], which: Cloud, cfg: &Config, patient_frame: bool) -> Result<Self> {
+        let (som1, som2) = (&cfg.som1, &cfg.som2);
         let frame0 = Frame::principal(cloud, som1.seed)
             .ok_or(Error::TooFewPoints { cloud: which, found: 0, min: 1 })?;
         if frame0.spread[1].is_nan() || frame0.spread[1] < MIN_SPREAD_MM {
@@ -109,7 +108,12 @@ impl SkeletonGraph {
         if key_points.len() < MIN_KEY_POINTS {
             return Err(Error::Endpoints { cloud: which, side: 0, found: 0, expected: 4 });
         }
-        let tree = Tree::prim(&key_points)?;
+        let tree = match cfg.tree {
+            TreeWeight::Euclidean => Tree::prim(&key_points)?,
+            TreeWeight::DataAware => {
+                Tree::prim_by(key_points.len(), |u, v| data_aware_weight(&key_points[u], &key_points[v], &live1))?
+            }
+        };
         let mut frame = Frame::principal(&key_points, 0)
             .ok_or(Error::Degenerate { cloud: which, spread_mm: 0.0 })?;
         if patient_frame {
@@ -124,14 +128,41 @@ impl SkeletonGraph {
             .collect();
         let mut hull = heapless::Vec::new();
         gift_wrap(&uv, &mut hull)?;
-        let endpoints = select_endpoints(&key_points, &tree, &uv, &hull, which)?;
-        Ok(SkeletonGraph { som1: live1, key_points, tree, frame, hull, endpoints })
+        let midline = median_u(&uv);
+        let endpoints = select_endpoints(&key_points, &tree, &uv, &hull, midline, which);
+        Ok(SkeletonGraph { som1: live1, key_points, tree, frame, hull, midline, endpoints })
     }
 
-    /// Positions of the eight endpoints, side 0 then side 1.
-    pub fn endpoint_positions(&self) -> [Vec3; 8] {
-        core::array::from_fn(|k| self.key_points[usize::from(self.endpoints[k / 4][k % 4])])
+    /// Side of a key point: 0 below the midline, 1 above.
+    pub fn side(&self, k: usize) -> usize {
+        usize::from(self.frame.local(&self.key_points[k]).x > self.midline)
     }
+}
+
+/// Edge weights of the key-point tree.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TreeWeight {
+    /// Paper Eq. 3: Euclidean length.
+    Euclidean,
+    /// Length plus the distance from the data along the edge (see [`data_aware_weight`]):
+    /// edges that bridge the empty gap between two ribs cost more than edges along one.
+    DataAware,
+}
+
+/// Interior points of an edge checked for data support.
+const SUPPORT_SAMPLES: usize = 4;
+
+/// `|a − b| + Σ d(mₖ, data)` over the edge points `mₖ` at 1/5 … 4/5 of the edge, `d` the
+/// distance to the nearest live SOM-1 node. An edge lying on the cartilage adds little;
+/// one crossing the gap between two ribs adds about twice the gap.
+pub fn data_aware_weight(a: &Vec3, b: &Vec3, data: &[Vec3]) -> f32 {
+    let mut w = (a - b).norm();
+    for k in 1..=SUPPORT_SAMPLES {
+        let t = k as f32 / (SUPPORT_SAMPLES + 1) as f32;
+        let m = a + (b - a) * t;
+        w += crate::geom::nearest(data, &m).map_or(0.0, |(_, d2)| libm::sqrtf(d2));
+    }
+    w
 }
 
 /// Fewest live key points from which 8 endpoints and 4 paths can come.
@@ -140,18 +171,29 @@ pub const MIN_KEY_POINTS: usize = 12;
 /// A cloud whose second principal spread is below this (mm) has no rib-cage extent.
 pub const MIN_SPREAD_MM: f32 = 1.0;
 
+fn median_u(uv: &[Vec2]) -> f32 {
+    let n = uv.len();
+    let mut us: heapless::Vec<f32, KEY_POINTS> = uv.iter().map(|q| q.x).collect();
+    us.sort_unstable_by(f32::total_cmp);
+    match n {
+        0 => 0.0,
+        _ if n % 2 == 0 => 0.5 * (us[n / 2 - 1] + us[n / 2]),
+        _ => us[n / 2],
+    }
+}
+
 fn select_endpoints(
     key: &[Vec3],
     tree: &Tree<KEY_POINTS>,
     uv: &[Vec2],
     hull: &[u16],
+    mid: f32,
     which: Cloud,
 ) -> Result<[[u8; 4]; 2]> {
     let n = key.len();
-    let mut us: heapless::Vec<f32, KEY_POINTS> = uv.iter().map(|q| q.x).collect();
-    us.sort_unstable_by(f32::total_cmp);
-    let mid = if n % 2 == 0 { 0.5 * (us[n / 2 - 1] + us[n / 2]) } else { us[n / 2] };
-    let half = [mid - us[0], us[n - 1] - mid];
+    let lo = uv.iter().map(|q| q.x).fold(f32::INFINITY, f32::min);
+    let hi = uv.iter().map(|q| q.x).fold(f32::NEG_INFINITY, f32::max);
+    let half = [mid - lo, hi - mid];
     let side_of = |i: usize| usize::from(uv[i].x > mid);
     let lateral = |i: usize| {
         let s = side_of(i);
@@ -206,12 +248,15 @@ fn select_endpoints(
 pub struct RibEnds(pub [[u8; 2]; 4]);
 
 impl RibEnds {
-    /// Template rib order: from `labels` (rib number per cloud point; values other than
-    /// 2..=5 are ignored) when given, else cranio-caudal on each side.
+    /// Template rib ends. With `labels` (rib number per cloud point; values other than
+    /// 2..=5 are ignored): each key point takes the label of the nearest labelled point,
+    /// and the end of rib `r` on a side is its most lateral key point labelled `r` there —
+    /// the labels make the endpoint rule unnecessary. Without labels: the endpoint rule's
+    /// endpoints, in cranio-caudal order on each side (+y cranial).
     pub fn from_template(graph: &SkeletonGraph, cloud: &[Vec3], labels: Option<&[u8]>) -> Result<Self> {
         let Some(labels) = labels else {
             // `endpoints` are already most cranial first.
-            let e = graph.endpoints;
+            let e = graph.endpoints?;
             return Ok(RibEnds(core::array::from_fn(|r| [e[0][r], e[1][r]])));
         };
         if labels.len() != cloud.len() {
@@ -220,24 +265,30 @@ impl RibEnds {
                 expected: crate::geom::sat_u32(cloud.len()),
             });
         }
-        let mut ends = [[u8::MAX; 2]; 4];
-        for (side, side_ends) in graph.endpoints.iter().enumerate() {
-            let mut count = [0u8; 4];
-            for &k in side_ends {
-                let p = graph.key_points[usize::from(k)];
-                let rib = cloud
-                    .iter()
-                    .zip(labels)
-                    .filter(|(_, l)| RIBS.contains(l))
-                    .min_by(|a, b| (a.0 - p).norm_squared().total_cmp(&(b.0 - p).norm_squared()))
-                    .map(|(_, &l)| l)
-                    .ok_or(Error::RibOrder { side: side as u8, rib: RIBS[0], found: 0 })?;
-                let r = usize::from(rib - RIBS[0]);
-                count[r] += 1;
-                ends[r][side] = k;
+        // Per (rib, side): best key point so far and its distance from the midline.
+        let mut best = [[(u8::MAX, -1.0f32); 2]; 4];
+        for (k, p) in graph.key_points.iter().enumerate() {
+            let nearest_rib = cloud
+                .iter()
+                .zip(labels)
+                .filter(|(_, l)| RIBS.contains(l))
+                .min_by(|a, b| (a.0 - p).norm_squared().total_cmp(&(b.0 - p).norm_squared()))
+                .map(|(_, &l)| l);
+            let Some(rib) = nearest_rib else { continue };
+            let side = graph.side(k);
+            let lateral = (graph.frame.local(p).x - graph.midline).abs();
+            let slot = &mut best[usize::from(rib - RIBS[0])][side];
+            if lateral > slot.1 {
+                *slot = (k as u8, lateral);
             }
-            if let Some(r) = count.iter().position(|&c| c != 1) {
-                return Err(Error::RibOrder { side: side as u8, rib: RIBS[r], found: count[r] });
+        }
+        let mut ends = [[0u8; 2]; 4];
+        for (r, sides) in best.iter().enumerate() {
+            for (side, &(k, _)) in sides.iter().enumerate() {
+                if k == u8::MAX {
+                    return Err(Error::RibOrder { side: side as u8, rib: RIBS[r], found: 0 });
+                }
+                ends[r][side] = k;
             }
         }
         Ok(RibEnds(ends))

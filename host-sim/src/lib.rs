@@ -1,1 +1,3 @@
-
+pub mod io;
+pub mod phantom;
+pub mod register;
