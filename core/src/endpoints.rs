@@ -17,9 +17,9 @@
 //!    with.
 
 use crate::error::Result;
-use crate::geom::{nearest, Rigid};
+use crate::geom::{nearest, Frame, Rigid};
 use crate::kabsch;
-use crate::skeleton::{RibEnds, SkeletonGraph, KEY_POINTS};
+use crate::skeleton::{RibEnds, SkeletonGraph};
 use crate::Vec3;
 use nalgebra::Matrix3;
 
@@ -43,7 +43,7 @@ pub struct EndpointMatch {
 
 /// Matches the endpoints of `target` to those of `template` whose rib order is `ends`.
 pub fn match_endpoints(target: &SkeletonGraph, template: &SkeletonGraph, ends: &RibEnds) -> Result<EndpointMatch> {
-    let (coarse, coarse_rms) = coarse_pose(&target.key_points, &template.key_points, target, template)?;
+    let (coarse, coarse_rms) = coarse_pose(&target.key_points, &target.frame, &template.key_points, &template.frame)?;
     // Template endpoints in slot order k = 2·rib + side.
     let ct: [Vec3; 8] = core::array::from_fn(|k| template.key_points[usize::from(ends.0[k / 2][k % 2])]);
     let found = target.endpoints?;
@@ -71,13 +71,9 @@ pub fn match_endpoints(target: &SkeletonGraph, template: &SkeletonGraph, ends: &
     Ok(EndpointMatch { ends: RibEnds(out), pose, coarse_rms, endpoint_rms: rms })
 }
 
-fn coarse_pose(
-    src: &[Vec3],
-    dst: &[Vec3],
-    src_graph: &SkeletonGraph,
-    dst_graph: &SkeletonGraph,
-) -> Result<(Rigid, f32)> {
-    let (fs, fd) = (&src_graph.frame, &dst_graph.frame);
+/// Rigid pose taking `src` onto `dst` from five starts (see the module docs), whatever
+/// their relative pose; `fs`, `fd` are their principal axes. Returns the pose and RMS.
+pub fn coarse_pose(src: &[Vec3], fs: &Frame, dst: &[Vec3], fd: &Frame) -> Result<(Rigid, f32)> {
     let mut best: Option<(Rigid, f32)> = None;
     for start in 0..5 {
         let rotation = if start == 0 {
@@ -92,7 +88,7 @@ fn coarse_pose(
             fd.axes * axes.transpose()
         };
         let init = Rigid { rotation, translation: fd.origin - rotation * fs.origin };
-        let (pose, rms) = icp(src, dst, init)?;
+        let (pose, rms) = icp(src, dst, init, COARSE_ITERATIONS)?;
         if best.is_none_or(|(_, b)| rms < b) {
             best = Some((pose, rms));
         }
@@ -101,11 +97,18 @@ fn coarse_pose(
     best.ok_or(crate::error::Error::RigidFit)
 }
 
-/// Point-to-point ICP of `src` onto `dst` from `pose`; returns the pose and final RMS.
-fn icp(src: &[Vec3], dst: &[Vec3], mut pose: Rigid) -> Result<(Rigid, f32)> {
+/// Largest source set of [`icp`] (a SOM-1 node set).
+pub const ICP_CAPACITY: usize = crate::skeleton::SOM1_CAPACITY;
+
+/// Point-to-point ICP of `src` (at most [`ICP_CAPACITY`] points) onto `dst` from `pose`,
+/// `iterations` rounds; returns the pose and the RMS of the last pairing.
+pub fn icp(src: &[Vec3], dst: &[Vec3], mut pose: Rigid, iterations: usize) -> Result<(Rigid, f32)> {
+    if src.len() > ICP_CAPACITY {
+        return Err(crate::error::Error::Capacity { capacity: ICP_CAPACITY as u32 });
+    }
     let mut rms = f32::INFINITY;
-    for _ in 0..COARSE_ITERATIONS {
-        let mut paired = [Vec3::zeros(); KEY_POINTS];
+    for _ in 0..iterations {
+        let mut paired = [Vec3::zeros(); ICP_CAPACITY];
         let mut sum = 0.0;
         for (p, q) in src.iter().zip(paired.iter_mut()) {
             let m = pose.apply(p);

@@ -39,6 +39,7 @@ pub mod error;
 pub mod example;
 pub mod fit;
 pub mod geom;
+pub mod guided;
 pub mod hull;
 pub mod kabsch;
 pub mod local_rigid;

@@ -2,8 +2,9 @@
 //! the local-rigid mapping.
 
 use crate::endpoints::{match_endpoints, EndpointMatch};
-use crate::error::{Cloud, Result};
-use crate::geom::validate;
+use crate::error::{Cloud, Error, Result};
+use crate::geom::{validate, Rigid};
+use crate::guided::{label_nodes, rib_points, target_skeleton, NodeLabels};
 use crate::local_rigid::{LocalRigid, NEIGHBOURS};
 use crate::skeleton::{RibEnds, RibSkeleton, SkeletonGraph, TreeWeight, TURN_ANGLE_DEG};
 use crate::som::SomConfig;
@@ -26,8 +27,16 @@ pub struct Config {
     pub turn_angle_deg: f32,
     /// N_r of Eq. 6.
     pub neighbours: usize,
-    /// Edge weights of the key-point tree.
+    /// Edge weights of the key-point tree (improvement option; paper: Euclidean).
     pub tree: TreeWeight,
+    /// Build the template skeleton from its anterior surface only, as ultrasound sees it
+    /// (improvement option; paper: whole surface). See [`crate::skeleton::keep_anterior`].
+    pub anterior_template: bool,
+    /// Extend each rib path's ends over the SOM-1 nodes to the cartilage tips before the
+    /// fit (improvement option; paper: off). See [`crate::skeleton::extend_tip`].
+    pub extend_tips: bool,
+    /// How rib points are found (improvement option; paper: [`RibModel::Graph`]).
+    pub rib_model: RibModel,
 }
 
 impl Default for Config {
@@ -38,8 +47,29 @@ impl Default for Config {
             turn_angle_deg: TURN_ANGLE_DEG,
             neighbours: NEIGHBOURS,
             tree: TreeWeight::Euclidean,
+            anterior_template: false,
+            extend_tips: false,
+            rib_model: RibModel::Graph,
         }
     }
+}
+
+impl Config {
+    /// The paper's method with this project's improvements switched on (see the README's
+    /// evaluation for what each buys on the phantoms).
+    pub fn improved() -> Self {
+        Config { tree: TreeWeight::DataAware, anterior_template: true, extend_tips: true, ..Config::default() }
+    }
+}
+
+/// How the 30 rib points of each cloud are found.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RibModel {
+    /// The paper: SOM 2 key points, MST, 8 endpoints, tree paths, Eq. 4 filter.
+    Graph,
+    /// Improvement: ribs from the labelled template's SOM-1 nodes, carried onto the
+    /// target (see [`crate::guided`]). Needs a labelled template.
+    Guided,
 }
 
 /// The prepared CT template: skeleton graph, rib order and the 30 skeleton points.
@@ -48,22 +78,40 @@ impl Default for Config {
 pub struct Template {
     /// SOM / MST / endpoints of the template cloud.
     pub graph: SkeletonGraph,
-    /// Rib order of the template's endpoints.
-    pub ends: RibEnds,
-    /// The 30 skeleton points.
+    /// Label of each SOM-1 node (empty for an unlabelled template).
+    pub node_labels: NodeLabels,
+    /// Rib order of the template's endpoints (graph model).
+    pub ends: Option<RibEnds>,
+    /// The 30 skeleton points (paths and degrees are empty for the guided model).
     pub skeleton: RibSkeleton,
 }
 
 impl Template {
     /// Prepares a template cloud in the patient frame (x lateral, y cranial, z anterior);
-    /// `labels` (one per point, rib number 2..=5, other values ignored) fix the rib order
-    /// when given.
+    /// `labels` (one per point: rib number 2..=5, 1 sternum, other values ignored) fix
+    /// the rib order when given; the guided model needs them.
     pub fn build(cloud: &[Vec3], labels: Option<&[u8]>, cfg: &Config) -> Result<Self> {
         validate(cloud, Cloud::Template, MIN_CLOUD_POINTS, MAX_CLOUD_POINTS)?;
         let graph = SkeletonGraph::build(cloud, Cloud::Template, cfg, true)?;
-        let ends = RibEnds::from_template(&graph, cloud, labels)?;
-        let skeleton = RibSkeleton::build(&graph, &ends, cfg.turn_angle_deg, Cloud::Template)?;
-        Ok(Template { graph, ends, skeleton })
+        let node_labels = match labels {
+            Some(l) => label_nodes(&graph.som1, cloud, l)?,
+            None => NodeLabels::new(),
+        };
+        match cfg.rib_model {
+            RibModel::Graph => {
+                let ends = RibEnds::from_template(&graph, cloud, labels)?;
+                let skeleton = RibSkeleton::build(&graph, &ends, cfg, Cloud::Template)?;
+                Ok(Template { graph, node_labels, ends: Some(ends), skeleton })
+            }
+            RibModel::Guided => {
+                if labels.is_none() {
+                    return Err(Error::Config("the guided rib model needs a labelled template"));
+                }
+                let points = rib_points(&graph.som1, &node_labels, &Rigid::identity(), Cloud::Template)?;
+                let skeleton = RibSkeleton { points, paths: Default::default(), degree: [3; 4] };
+                Ok(Template { graph, node_labels, ends: None, skeleton })
+            }
+        }
     }
 }
 
@@ -72,8 +120,10 @@ impl Template {
 pub struct Registration {
     /// SOM / MST / endpoints of the target cloud.
     pub graph: SkeletonGraph,
-    /// How the target's endpoints were matched to the template's.
-    pub matching: EndpointMatch,
+    /// Rigid pose target → template found on the way (endpoint ICP or guided ICP).
+    pub pose: Rigid,
+    /// How the target's endpoints were matched to the template's (graph model).
+    pub matching: Option<EndpointMatch>,
     /// The target's 30 skeleton points, paired with the template's.
     pub skeleton: RibSkeleton,
     /// The mapping template → target.
@@ -85,8 +135,24 @@ pub struct Registration {
 pub fn register(template: &Template, target: &[Vec3], cfg: &Config) -> Result<Registration> {
     validate(target, Cloud::Target, MIN_CLOUD_POINTS, MAX_CLOUD_POINTS)?;
     let graph = SkeletonGraph::build(target, Cloud::Target, cfg, false)?;
-    let matching = match_endpoints(&graph, &template.graph, &template.ends)?;
-    let skeleton = RibSkeleton::build(&graph, &matching.ends, cfg.turn_angle_deg, Cloud::Target)?;
+    let (pose, matching, skeleton) = match (cfg.rib_model, &template.ends) {
+        (RibModel::Graph, Some(ends)) => {
+            let matching = match_endpoints(&graph, &template.graph, ends)?;
+            let skeleton = RibSkeleton::build(&graph, &matching.ends, cfg, Cloud::Target)?;
+            (matching.pose, Some(matching), skeleton)
+        }
+        (RibModel::Guided, None) => {
+            let (pose, points) = target_skeleton(
+                &graph,
+                &template.graph,
+                &template.node_labels,
+                &template.skeleton.points,
+                cfg.neighbours,
+            )?;
+            (pose, None, RibSkeleton { points, paths: Default::default(), degree: [3; 4] })
+        }
+        _ => return Err(Error::Config("template and registration use different rib models")),
+    };
     let map = LocalRigid::new(template.skeleton.points, skeleton.points, cfg.neighbours)?;
-    Ok(Registration { graph, matching, skeleton, map })
+    Ok(Registration { graph, pose, matching, skeleton, map })
 }

@@ -40,16 +40,11 @@ use crate::pipeline::Config;
 use crate::som::Som;
 use crate::Vec3;
 
-/// SOM 1 grid rows (paper: 20 × 20).
-pub const SOM1_ROWS: usize = 20;
-/// SOM 1 grid columns.
-pub const SOM1_COLS: usize = 20;
-/// SOM 2 grid rows (paper: 5 × 8).
-pub const SOM2_ROWS: usize = 5;
-/// SOM 2 grid columns.
-pub const SOM2_COLS: usize = 8;
-/// Skeleton key points: SOM 2 nodes.
-pub const KEY_POINTS: usize = SOM2_ROWS * SOM2_COLS;
+/// Capacity of SOM 1 (paper grid: 20 × 20 = 400 nodes; 400 × 12 B = 4.7 KiB).
+pub const SOM1_CAPACITY: usize = 400;
+/// Capacity of SOM 2, the skeleton key points (paper grid: 5 × 8 = 40; room for larger
+/// grids up to 128 nodes, 1.5 KiB; node indices must fit a `u8`).
+pub const KEY_POINTS: usize = 128;
 /// Ribs whose cartilage is registered.
 pub const RIBS: [u8; 4] = [2, 3, 4, 5];
 /// Resampled points per rib (paper: 6, 6, 8, 10).
@@ -70,7 +65,7 @@ const _: () = assert!(KEY_POINTS <= crate::mst::MAX_TREE_NODES);
 #[derive(Clone, Debug, PartialEq)]
 pub struct SkeletonGraph {
     /// Live SOM 1 nodes (at most 400; see [`Som::live_nodes`]).
-    pub som1: heapless::Vec<Vec3, { SOM1_ROWS * SOM1_COLS }>,
+    pub som1: heapless::Vec<Vec3, SOM1_CAPACITY>,
     /// Live SOM 2 nodes: the key points (at most 40).
     pub key_points: heapless::Vec<Vec3, KEY_POINTS>,
     /// MST over the key points.
@@ -97,12 +92,15 @@ impl SkeletonGraph {
         if frame0.spread[1].is_nan() || frame0.spread[1] < MIN_SPREAD_MM {
             return Err(Error::Degenerate { cloud: which, spread_mm: frame0.spread[1] });
         }
-        let map1 = Som::<SOM1_ROWS, SOM1_COLS>::train(cloud, &frame0, som1)?;
+        let map1 = Som::<SOM1_CAPACITY>::train(cloud, &frame0, som1)?;
         let mut live1 = heapless::Vec::new();
         map1.live_nodes(cloud, som1.seed, &mut live1)?;
+        if patient_frame && cfg.anterior_template {
+            keep_anterior(&mut live1);
+        }
         let frame1 = Frame::principal(&live1, som2.seed)
             .ok_or(Error::Degenerate { cloud: which, spread_mm: 0.0 })?;
-        let map2 = Som::<SOM2_ROWS, SOM2_COLS>::train(&live1, &frame1, som2)?;
+        let map2 = Som::<KEY_POINTS>::train(&live1, &frame1, som2)?;
         let mut key_points = heapless::Vec::new();
         map2.live_nodes(&live1, som2.seed, &mut key_points)?;
         if key_points.len() < MIN_KEY_POINTS {
@@ -137,6 +135,26 @@ impl SkeletonGraph {
     pub fn side(&self, k: usize) -> usize {
         usize::from(self.frame.local(&self.key_points[k]).x > self.midline)
     }
+}
+
+/// Lateral radius (mm, in the x-y plane) within which a node hides another below it.
+pub const ANTERIOR_RADIUS_MM: f32 = 6.0;
+/// Depth (mm, along z) by which a node must lie below another to count as hidden.
+pub const ANTERIOR_MARGIN_MM: f32 = 3.0;
+
+/// Keeps the nodes a probe above the patient could see: drops every node with another
+/// node within [`ANTERIOR_RADIUS_MM`] in x-y that lies more than [`ANTERIOR_MARGIN_MM`]
+/// closer to the probe (+z). Ultrasound shows only the anterior cartilage surface, so a
+/// skeleton of the whole CT surface sits about half a cartilage thickness deeper than the
+/// US skeleton; this removes that bias (cloud in the patient frame).
+pub fn keep_anterior<const N: usize>(nodes: &mut heapless::Vec<Vec3, N>) {
+    let all = nodes.clone();
+    nodes.retain(|p| {
+        !all.iter().any(|q| {
+            let (dx, dy) = (q.x - p.x, q.y - p.y);
+            dx * dx + dy * dy < ANTERIOR_RADIUS_MM * ANTERIOR_RADIUS_MM && q.z > p.z + ANTERIOR_MARGIN_MM
+        })
+    });
 }
 
 /// Edge weights of the key-point tree.
@@ -309,7 +327,8 @@ pub struct RibSkeleton {
 
 impl RibSkeleton {
     /// Paths, turn filter, fit and resampling for the rib `ends` of `graph`.
-    pub fn build(graph: &SkeletonGraph, ends: &RibEnds, turn_angle_deg: f32, which: Cloud) -> Result<Self> {
+    pub fn build(graph: &SkeletonGraph, ends: &RibEnds, cfg: &Config, which: Cloud) -> Result<Self> {
+        let turn_angle_deg = cfg.turn_angle_deg;
         if turn_angle_deg.is_nan() || turn_angle_deg <= 0.0 || turn_angle_deg > 180.0 {
             return Err(Error::Config("turn angle must be in (0, 180] degrees"));
         }
@@ -326,21 +345,21 @@ impl RibSkeleton {
             if kept.len() < 2 {
                 return Err(Error::RibPath { cloud: which, rib: RIBS[r], found: kept.len() as u8, min: 2 });
             }
-            let local: heapless::Vec<Vec3, KEY_POINTS> =
+            let mut local: heapless::Vec<Vec3, { KEY_POINTS + 2 }> =
                 kept.iter().map(|&k| graph.frame.local(&graph.key_points[usize::from(k)])).collect();
-            let xs: heapless::Vec<f32, KEY_POINTS> = local.iter().map(|q| q.x).collect();
-            let ys: heapless::Vec<f32, KEY_POINTS> = local.iter().map(|q| q.y).collect();
-            let zs: heapless::Vec<f32, KEY_POINTS> = local.iter().map(|q| q.z).collect();
-            let deg = (kept.len() - 1).min(3);
-            let fy = Poly::fit(&xs, &ys, deg)
-                .map_err(|_| Error::RibPath { cloud: which, rib: RIBS[r], found: kept.len() as u8, min: 2 })?;
-            let fz = Poly::fit(&xs, &zs, deg)
-                .map_err(|_| Error::RibPath { cloud: which, rib: RIBS[r], found: kept.len() as u8, min: 2 })?;
-            degree[r] = deg as u8;
-            let (x0, x1) = (xs[0], xs[xs.len() - 1]);
-            for (k, x) in equal_steps(x0, x1, RIB_SAMPLES[r]).enumerate() {
-                points[offset + k] = graph.frame.world(&Vec3::new(x, fy.eval(x), fz.eval(x)));
+            if cfg.extend_tips {
+                let first = graph.key_points[usize::from(kept[0])];
+                let last = graph.key_points[usize::from(kept[kept.len() - 1])];
+                let t0 = graph.frame.local(&extend_tip(&graph.som1, first, last));
+                let t1 = graph.frame.local(&extend_tip(&graph.som1, last, first));
+                // Note: capacity is KEY_POINTS + 2 and `local` holds at most KEY_POINTS.
+                let _ = local.insert(0, t0);
+                let _ = local.push(t1);
             }
+            let (x0, x1) = (local[0].x, local[local.len() - 1].x);
+            let out = &mut points[offset..offset + RIB_SAMPLES[r]];
+            degree[r] = fit_rib(&local, x0, x1, |q| graph.frame.world(q), out)
+                .map_err(|_| Error::RibPath { cloud: which, rib: RIBS[r], found: kept.len() as u8, min: 2 })?;
             offset += RIB_SAMPLES[r];
         }
         Ok(RibSkeleton { points, paths, degree })
@@ -354,6 +373,59 @@ impl RibSkeleton {
         }
         s
     }
+}
+
+/// Paper Eq. 5 for one rib: least-squares `y(x)`, `z(x)` through `local` (points in a
+/// frame whose x runs along the rib; degree 3, or `len − 1` when fewer than 4 points),
+/// resampled at `out.len()` equal x steps from `x0` to `x1` and taken back to the world
+/// by `to_world`. Returns the degree used.
+pub fn fit_rib(local: &[Vec3], x0: f32, x1: f32, to_world: impl Fn(&Vec3) -> Vec3, out: &mut [Vec3]) -> Result<u8> {
+    const CAP: usize = crate::skeleton::SOM1_CAPACITY;
+    if local.len() < 2 || local.len() > CAP {
+        return Err(Error::Config("a rib fit needs 2..=400 points"));
+    }
+    let xs: heapless::Vec<f32, CAP> = local.iter().map(|q| q.x).collect();
+    let ys: heapless::Vec<f32, CAP> = local.iter().map(|q| q.y).collect();
+    let zs: heapless::Vec<f32, CAP> = local.iter().map(|q| q.z).collect();
+    let deg = (local.len() - 1).min(3);
+    let fy = Poly::fit(&xs, &ys, deg)?;
+    let fz = Poly::fit(&xs, &zs, deg)?;
+    let n = out.len();
+    for (p, x) in out.iter_mut().zip(equal_steps(x0, x1, n)) {
+        *p = to_world(&Vec3::new(x, fy.eval(x), fz.eval(x)));
+    }
+    Ok(deg as u8)
+}
+
+/// Search radius of one tip-extension step, mm (≈ 1.5 SOM-1 node spacings on a 3,000-point
+/// cartilage cloud).
+pub const TIP_STEP_MM: f32 = 12.0;
+/// A tip-extension step must stay within this angle of the rib's direction (cos 40°), so
+/// it never jumps to the neighbouring rib, which lies across the rib.
+const TIP_COS: f32 = 0.766;
+
+/// Walks from the rib end `from` outward (away from `other`) over the live SOM-1 nodes,
+/// each step to the node farthest along the rib direction within [`TIP_STEP_MM`] and
+/// [`TIP_COS`], until no node continues the rib. SOM key points contract away from the
+/// ends of a structure (the map's boundary effect); this recovers the true extent.
+pub fn extend_tip(som1: &[Vec3], from: Vec3, other: Vec3) -> Vec3 {
+    let Some(d) = (from - other).try_normalize(1e-6) else { return from };
+    let mut tip = from;
+    for _ in 0..32 {
+        let next = som1
+            .iter()
+            .filter(|n| {
+                let v = *n - tip;
+                let len = v.norm();
+                len < TIP_STEP_MM && v.dot(&d) > TIP_COS * len && v.dot(&d) > 0.5
+            })
+            .max_by(|a, b| (*a - tip).dot(&d).total_cmp(&(*b - tip).dot(&d)));
+        match next {
+            Some(n) => tip = *n,
+            None => break,
+        }
+    }
+    tip
 }
 
 /// Paper Eq. 4: keep the first two path points, then a point only if the turn from the

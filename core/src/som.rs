@@ -25,9 +25,16 @@ use crate::Vec3;
 /// Points (at most) checked when finding the live nodes of a map.
 pub const LIVE_SAMPLES: usize = 4096;
 
-/// Training schedule of one SOM.
+/// Longest grid side supported (rows or columns).
+pub const MAX_GRID_SIDE: usize = 64;
+
+/// Grid and training schedule of one SOM.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SomConfig {
+    /// Grid rows (along the second principal axis at initialisation).
+    pub rows: usize,
+    /// Grid columns (along the first principal axis at initialisation).
+    pub cols: usize,
     /// Number of samples drawn (iterations).
     pub iterations: u32,
     /// Learning rate at the first iteration.
@@ -45,6 +52,8 @@ pub struct SomConfig {
 impl SomConfig {
     /// Paper SOM 1 (20 × 20): unifies a cloud to 400 evenly spread points.
     pub const SOM1: SomConfig = SomConfig {
+        rows: 20,
+        cols: 20,
         iterations: 6000,
         lr_start: 0.5,
         lr_end: 0.01,
@@ -54,6 +63,8 @@ impl SomConfig {
     };
     /// Paper SOM 2 (5 × 8): 40 skeleton key points from the SOM-1 output.
     pub const SOM2: SomConfig = SomConfig {
+        rows: 5,
+        cols: 8,
         iterations: 3000,
         lr_start: 0.5,
         lr_end: 0.01,
@@ -62,7 +73,15 @@ impl SomConfig {
         seed: 0x5EED_0002,
     };
 
-    fn check(&self) -> Result<()> {
+    fn check(&self, capacity: usize) -> Result<()> {
+        let grid = self.rows >= 1
+            && self.cols >= 1
+            && self.rows <= MAX_GRID_SIDE
+            && self.cols <= MAX_GRID_SIDE
+            && self.rows * self.cols <= capacity;
+        if !grid {
+            return Err(Error::Config("SOM grid must be 1..=64 per side and fit the map's capacity"));
+        }
         let ok = self.iterations >= 1
             && self.lr_start > 0.0
             && self.lr_start <= 1.0
@@ -80,25 +99,28 @@ impl SomConfig {
     }
 }
 
-/// A trained (or initialised) map: `R` rows of `C` nodes.
+/// A trained (or initialised) map of `rows × cols ≤ CAP` nodes, stored row after row.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Som<const R: usize, const C: usize> {
-    nodes: [[Vec3; C]; R],
+pub struct Som<const CAP: usize> {
+    rows: usize,
+    cols: usize,
+    nodes: heapless::Vec<Vec3, CAP>,
 }
 
-impl<const R: usize, const C: usize> Som<R, C> {
+impl<const CAP: usize> Som<CAP> {
     /// Trains a map on `points` (any non-empty size; nothing is copied) with `frame` the
     /// principal axes of `points` (for the linear initialisation).
     pub fn train(points: &[Vec3], frame: &Frame, cfg: &SomConfig) -> Result<Self> {
-        cfg.check()?;
-        if points.is_empty() || R == 0 || C == 0 {
-            return Err(Error::Config("SOM needs a non-empty grid and cloud"));
+        cfg.check(CAP)?;
+        if points.is_empty() {
+            return Err(Error::Config("SOM needs a non-empty cloud"));
         }
         let n = u32::try_from(points.len()).map_err(|_| Error::Config("cloud too large"))?;
-        let mut som = Self::linear_init(frame);
+        let (rows, cols) = (cfg.rows, cfg.cols);
+        let mut som = Self::linear_init(frame, rows, cols)?;
         let mut rng = Rng::new(cfg.seed);
-        let mut g_row = [0.0f32; R];
-        let mut g_col = [0.0f32; C];
+        let mut g_row = [0.0f32; MAX_GRID_SIDE];
+        let mut g_col = [0.0f32; MAX_GRID_SIDE];
         let last = (cfg.iterations - 1).max(1) as f32;
         let radius_ratio = libm::logf(cfg.radius_end / cfg.radius_start);
         let lr_ratio = libm::logf(cfg.lr_end / cfg.lr_start);
@@ -110,8 +132,8 @@ impl<const R: usize, const C: usize> Som<R, C> {
             let (br, bc) = som.bmu(&p);
             let reach = libm::ceilf(3.0 * sigma) as usize;
             let inv = -0.5 / (sigma * sigma);
-            let (r0, r1) = (br.saturating_sub(reach), (br + reach).min(R - 1));
-            let (c0, c1) = (bc.saturating_sub(reach), (bc + reach).min(C - 1));
+            let (r0, r1) = (br.saturating_sub(reach), (br + reach).min(rows - 1));
+            let (c0, c1) = (bc.saturating_sub(reach), (bc + reach).min(cols - 1));
             for (r, g) in g_row.iter_mut().enumerate().take(r1 + 1).skip(r0) {
                 let d = r.abs_diff(br) as f32;
                 *g = libm::expf(inv * d * d);
@@ -120,7 +142,7 @@ impl<const R: usize, const C: usize> Som<R, C> {
                 let d = c.abs_diff(bc) as f32;
                 *g = lr * libm::expf(inv * d * d);
             }
-            for (row, gr) in som.nodes[r0..=r1].iter_mut().zip(&g_row[r0..=r1]) {
+            for (row, gr) in som.nodes.chunks_exact_mut(cols).skip(r0).take(r1 + 1 - r0).zip(&g_row[r0..=r1]) {
                 for (w, gc) in row[c0..=c1].iter_mut().zip(&g_col[c0..=c1]) {
                     *w += (p - *w) * (gr * gc);
                 }
@@ -129,8 +151,8 @@ impl<const R: usize, const C: usize> Som<R, C> {
         Ok(som)
     }
 
-    /// Nodes spread evenly over ±2σ of the first two principal axes.
-    pub fn linear_init(frame: &Frame) -> Self {
+    /// `rows × cols` nodes spread evenly over ±2σ of the first two principal axes.
+    pub fn linear_init(frame: &Frame, rows: usize, cols: usize) -> Result<Self> {
         let span = |k: usize, of: usize| {
             if of <= 1 {
                 0.0
@@ -140,26 +162,29 @@ impl<const R: usize, const C: usize> Som<R, C> {
         };
         let e1 = frame.axes.column(0) * (2.0 * frame.spread[0]);
         let e2 = frame.axes.column(1) * (2.0 * frame.spread[1]);
-        let nodes = core::array::from_fn(|r| {
-            core::array::from_fn(|c| frame.origin + e1 * span(c, C) + e2 * span(r, R))
-        });
-        Som { nodes }
+        let mut nodes = heapless::Vec::new();
+        for r in 0..rows {
+            for c in 0..cols {
+                nodes
+                    .push(frame.origin + e1 * span(c, cols) + e2 * span(r, rows))
+                    .map_err(|_| Error::Capacity { capacity: CAP as u32 })?;
+            }
+        }
+        Ok(Som { rows, cols, nodes })
     }
 
     /// Grid position (row, column) of the node nearest to `p`; ties go to the first.
     pub fn bmu(&self, p: &Vec3) -> (usize, usize) {
-        let mut best = (0, 0);
+        let mut best = 0;
         let mut best_d = f32::INFINITY;
-        for (r, row) in self.nodes.iter().enumerate() {
-            for (c, w) in row.iter().enumerate() {
-                let d = (w - p).norm_squared();
-                if d < best_d {
-                    best_d = d;
-                    best = (r, c);
-                }
+        for (k, w) in self.nodes.iter().enumerate() {
+            let d = (w - p).norm_squared();
+            if d < best_d {
+                best_d = d;
+                best = k;
             }
         }
-        best
+        (best / self.cols.max(1), best % self.cols.max(1))
     }
 
     /// The nodes that are the best matching unit of at least one of `points` (all of
@@ -168,19 +193,17 @@ impl<const R: usize, const C: usize> Som<R, C> {
     /// gaps between separate structures (between two ribs): they lie on no surface.
     pub fn live_nodes<const M: usize>(&self, points: &[Vec3], seed: u64, out: &mut heapless::Vec<Vec3, M>) -> Result<()> {
         out.clear();
-        let mut hit = [[false; C]; R];
+        let mut hit = [false; CAP];
         let n = points.len();
         let mut rng = Rng::new(seed);
         for k in 0..n.min(LIVE_SAMPLES) {
             let p = if n <= LIVE_SAMPLES { points[k] } else { points[rng.below(crate::geom::sat_u32(n)) as usize] };
             let (r, c) = self.bmu(&p);
-            hit[r][c] = true;
+            hit[r * self.cols + c] = true;
         }
-        for (row, hits) in self.nodes.iter().zip(&hit) {
-            for (w, &h) in row.iter().zip(hits) {
-                if h {
-                    out.push(*w).map_err(|_| Error::Capacity { capacity: M as u32 })?;
-                }
+        for (w, &h) in self.nodes.iter().zip(&hit) {
+            if h {
+                out.push(*w).map_err(|_| Error::Capacity { capacity: M as u32 })?;
             }
         }
         Ok(())
@@ -188,7 +211,7 @@ impl<const R: usize, const C: usize> Som<R, C> {
 
     /// All nodes, row after row.
     pub fn nodes(&self) -> &[Vec3] {
-        self.nodes.as_flattened()
+        &self.nodes
     }
 }
 
@@ -206,10 +229,10 @@ mod tests {
         let pts = sheet();
         let frame = Frame::principal(&pts, 1).unwrap();
         let cfg = SomConfig { iterations: 4000, ..SomConfig::SOM2 };
-        let a = Som::<5, 8>::train(&pts, &frame, &cfg).unwrap();
-        let b = Som::<5, 8>::train(&pts, &frame, &cfg).unwrap();
+        let a = Som::<40>::train(&pts, &frame, &cfg).unwrap();
+        let b = Som::<40>::train(&pts, &frame, &cfg).unwrap();
         assert_eq!(a, b);
-        let c = Som::<5, 8>::train(&pts, &frame, &SomConfig { seed: 9, ..cfg }).unwrap();
+        let c = Som::<40>::train(&pts, &frame, &SomConfig { seed: 9, ..cfg }).unwrap();
         assert_ne!(a, c);
         // Every node ends on the sheet, and the map spreads over it: the nodes cover
         // its corners to within a grid cell of the 5 × 8 map (25 × 20 mm).
@@ -228,9 +251,9 @@ mod tests {
         let pts = sheet();
         let frame = Frame::principal(&pts, 1).unwrap();
         let bad = SomConfig { iterations: 0, ..SomConfig::SOM2 };
-        assert!(matches!(Som::<5, 8>::train(&pts, &frame, &bad), Err(Error::Config(_))));
+        assert!(matches!(Som::<40>::train(&pts, &frame, &bad), Err(Error::Config(_))));
         let bad = SomConfig { lr_start: f32::NAN, ..SomConfig::SOM2 };
-        assert!(matches!(Som::<5, 8>::train(&pts, &frame, &bad), Err(Error::Config(_))));
-        assert!(matches!(Som::<5, 8>::train(&[], &frame, &SomConfig::SOM2), Err(Error::Config(_))));
+        assert!(matches!(Som::<40>::train(&pts, &frame, &bad), Err(Error::Config(_))));
+        assert!(matches!(Som::<40>::train(&[], &frame, &SomConfig::SOM2), Err(Error::Config(_))));
     }
 }

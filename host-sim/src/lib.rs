@@ -1,3 +1,4 @@
 pub mod io;
 pub mod phantom;
 pub mod register;
+pub mod demo;

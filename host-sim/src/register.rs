@@ -156,7 +156,7 @@ pub fn register_clouds(
     progress(&format!(
         "target: {} points -> skeleton, endpoints matched (rms {:.1} mm) ({:.1} ms)",
         target.len(),
-        reg.matching.endpoint_rms,
+        reg.matching.map_or(0.0, |m| m.endpoint_rms),
         ms(t_register)
     ));
     let t2 = Instant::now();
@@ -195,11 +195,11 @@ pub fn register_clouds(
         "target": { "points": target.len() },
         "skeleton": skeleton_json(&tpl, &reg),
         "endpoint_match": {
-            "coarse_rms_mm": reg.matching.coarse_rms,
-            "endpoint_rms_mm": reg.matching.endpoint_rms,
-            "rotation_deg": reg.matching.pose.angle_deg(),
-            "rotation": rows(&reg.matching.pose.rotation),
-            "translation": reg.matching.pose.translation.as_slice(),
+            "coarse_rms_mm": reg.matching.map(|m| m.coarse_rms),
+            "endpoint_rms_mm": reg.matching.map_or(0.0, |m| m.endpoint_rms),
+            "rotation_deg": reg.pose.angle_deg(),
+            "rotation": rows(&reg.pose.rotation),
+            "translation": reg.pose.translation.as_slice(),
         },
         "metrics": {
             "ed_mean_mm": metrics.ed.mean,
