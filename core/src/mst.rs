@@ -22,12 +22,7 @@ impl<const N: usize> Tree<N> {
     /// Prim's MST of `points` (1..=N of them, N ≤ 255) rooted at point 0. Ties between
     /// equal edges go to the lower index, so the tree is deterministic.
     pub fn prim(points: &[Vec3]) -> Result<Self> {
-        Self::prim_by(points.len(), |u, v| (points[u] - points[v]).norm())
-    }
-
-    /// Prim's MST of the complete graph on `n` nodes with edge weights `weight(u, v)`
-    /// (symmetric, finite).
-    pub fn prim_by(n: usize, weight: impl Fn(usize, usize) -> f32) -> Result<Self> {
+        let n = points.len();
         if n == 0 || n > N || N > MAX_TREE_NODES {
             return Err(Error::Config("tree size must be 1..=N, N <= 255"));
         }
@@ -48,7 +43,7 @@ impl<const N: usize> Tree<N> {
             done[u] = true;
             for v in 0..n {
                 if !done[v] {
-                    let d = weight(u, v);
+                    let d = (points[u] - points[v]).norm();
                     if d < best[v] {
                         best[v] = d;
                         parent[v] = u as u8; // u < N <= 255

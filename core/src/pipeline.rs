@@ -6,7 +6,7 @@ use crate::error::{Cloud, Error, Result};
 use crate::geom::{validate, Rigid};
 use crate::guided::{label_nodes, rib_points, target_skeleton, NodeLabels};
 use crate::local_rigid::{LocalRigid, NEIGHBOURS};
-use crate::skeleton::{RibEnds, RibSkeleton, SkeletonGraph, TreeWeight, TURN_ANGLE_DEG};
+use crate::skeleton::{RibEnds, RibSkeleton, SkeletonGraph, TURN_ANGLE_DEG};
 use crate::som::SomConfig;
 use crate::Vec3;
 
@@ -27,14 +27,6 @@ pub struct Config {
     pub turn_angle_deg: f32,
     /// N_r of Eq. 6.
     pub neighbours: usize,
-    /// Edge weights of the key-point tree (improvement option; paper: Euclidean).
-    pub tree: TreeWeight,
-    /// Build the template skeleton from its anterior surface only, as ultrasound sees it
-    /// (improvement option; paper: whole surface). See [`crate::skeleton::keep_anterior`].
-    pub anterior_template: bool,
-    /// Extend each rib path's ends over the SOM-1 nodes to the cartilage tips before the
-    /// fit (improvement option; paper: off). See [`crate::skeleton::extend_tip`].
-    pub extend_tips: bool,
     /// How rib points are found (improvement option; paper: [`RibModel::Graph`]).
     pub rib_model: RibModel,
 }
@@ -46,19 +38,17 @@ impl Default for Config {
             som2: SomConfig::SOM2,
             turn_angle_deg: TURN_ANGLE_DEG,
             neighbours: NEIGHBOURS,
-            tree: TreeWeight::Euclidean,
-            anterior_template: false,
-            extend_tips: false,
             rib_model: RibModel::Graph,
         }
     }
 }
 
 impl Config {
-    /// The paper's method with this project's improvements switched on (see the README's
-    /// evaluation for what each buys on the phantoms).
+    /// The paper's method with this project's improvement: the guided rib model (see the
+    /// README's evaluation). Pair it with an anterior-surface template (host-side
+    /// `ribreg_sim::prep::anterior_mask`).
     pub fn improved() -> Self {
-        Config { tree: TreeWeight::DataAware, anterior_template: true, extend_tips: true, ..Config::default() }
+        Config { rib_model: RibModel::Guided, ..Config::default() }
     }
 }
 

@@ -95,9 +95,6 @@ impl SkeletonGraph {
         let map1 = Som::<SOM1_CAPACITY>::train(cloud, &frame0, som1)?;
         let mut live1 = heapless::Vec::new();
         map1.live_nodes(cloud, som1.seed, &mut live1)?;
-        if patient_frame && cfg.anterior_template {
-            keep_anterior(&mut live1);
-        }
         let frame1 = Frame::principal(&live1, som2.seed)
             .ok_or(Error::Degenerate { cloud: which, spread_mm: 0.0 })?;
         let map2 = Som::<KEY_POINTS>::train(&live1, &frame1, som2)?;
@@ -106,12 +103,7 @@ impl SkeletonGraph {
         if key_points.len() < MIN_KEY_POINTS {
             return Err(Error::Endpoints { cloud: which, side: 0, found: 0, expected: 4 });
         }
-        let tree = match cfg.tree {
-            TreeWeight::Euclidean => Tree::prim(&key_points)?,
-            TreeWeight::DataAware => {
-                Tree::prim_by(key_points.len(), |u, v| data_aware_weight(&key_points[u], &key_points[v], &live1))?
-            }
-        };
+        let tree = Tree::prim(&key_points)?;
         let mut frame = Frame::principal(&key_points, 0)
             .ok_or(Error::Degenerate { cloud: which, spread_mm: 0.0 })?;
         if patient_frame {
@@ -135,52 +127,6 @@ impl SkeletonGraph {
     pub fn side(&self, k: usize) -> usize {
         usize::from(self.frame.local(&self.key_points[k]).x > self.midline)
     }
-}
-
-/// Lateral radius (mm, in the x-y plane) within which a node hides another below it.
-pub const ANTERIOR_RADIUS_MM: f32 = 6.0;
-/// Depth (mm, along z) by which a node must lie below another to count as hidden.
-pub const ANTERIOR_MARGIN_MM: f32 = 3.0;
-
-/// Keeps the nodes a probe above the patient could see: drops every node with another
-/// node within [`ANTERIOR_RADIUS_MM`] in x-y that lies more than [`ANTERIOR_MARGIN_MM`]
-/// closer to the probe (+z). Ultrasound shows only the anterior cartilage surface, so a
-/// skeleton of the whole CT surface sits about half a cartilage thickness deeper than the
-/// US skeleton; this removes that bias (cloud in the patient frame).
-pub fn keep_anterior<const N: usize>(nodes: &mut heapless::Vec<Vec3, N>) {
-    let all = nodes.clone();
-    nodes.retain(|p| {
-        !all.iter().any(|q| {
-            let (dx, dy) = (q.x - p.x, q.y - p.y);
-            dx * dx + dy * dy < ANTERIOR_RADIUS_MM * ANTERIOR_RADIUS_MM && q.z > p.z + ANTERIOR_MARGIN_MM
-        })
-    });
-}
-
-/// Edge weights of the key-point tree.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum TreeWeight {
-    /// Paper Eq. 3: Euclidean length.
-    Euclidean,
-    /// Length plus the distance from the data along the edge (see [`data_aware_weight`]):
-    /// edges that bridge the empty gap between two ribs cost more than edges along one.
-    DataAware,
-}
-
-/// Interior points of an edge checked for data support.
-const SUPPORT_SAMPLES: usize = 4;
-
-/// `|a − b| + Σ d(mₖ, data)` over the edge points `mₖ` at 1/5 … 4/5 of the edge, `d` the
-/// distance to the nearest live SOM-1 node. An edge lying on the cartilage adds little;
-/// one crossing the gap between two ribs adds about twice the gap.
-pub fn data_aware_weight(a: &Vec3, b: &Vec3, data: &[Vec3]) -> f32 {
-    let mut w = (a - b).norm();
-    for k in 1..=SUPPORT_SAMPLES {
-        let t = k as f32 / (SUPPORT_SAMPLES + 1) as f32;
-        let m = a + (b - a) * t;
-        w += crate::geom::nearest(data, &m).map_or(0.0, |(_, d2)| libm::sqrtf(d2));
-    }
-    w
 }
 
 /// Fewest live key points from which 8 endpoints and 4 paths can come.
@@ -345,17 +291,8 @@ impl RibSkeleton {
             if kept.len() < 2 {
                 return Err(Error::RibPath { cloud: which, rib: RIBS[r], found: kept.len() as u8, min: 2 });
             }
-            let mut local: heapless::Vec<Vec3, { KEY_POINTS + 2 }> =
+            let local: heapless::Vec<Vec3, KEY_POINTS> =
                 kept.iter().map(|&k| graph.frame.local(&graph.key_points[usize::from(k)])).collect();
-            if cfg.extend_tips {
-                let first = graph.key_points[usize::from(kept[0])];
-                let last = graph.key_points[usize::from(kept[kept.len() - 1])];
-                let t0 = graph.frame.local(&extend_tip(&graph.som1, first, last));
-                let t1 = graph.frame.local(&extend_tip(&graph.som1, last, first));
-                // Note: capacity is KEY_POINTS + 2 and `local` holds at most KEY_POINTS.
-                let _ = local.insert(0, t0);
-                let _ = local.push(t1);
-            }
             let (x0, x1) = (local[0].x, local[local.len() - 1].x);
             let out = &mut points[offset..offset + RIB_SAMPLES[r]];
             degree[r] = fit_rib(&local, x0, x1, |q| graph.frame.world(q), out)
@@ -395,37 +332,6 @@ pub fn fit_rib(local: &[Vec3], x0: f32, x1: f32, to_world: impl Fn(&Vec3) -> Vec
         *p = to_world(&Vec3::new(x, fy.eval(x), fz.eval(x)));
     }
     Ok(deg as u8)
-}
-
-/// Search radius of one tip-extension step, mm (≈ 1.5 SOM-1 node spacings on a 3,000-point
-/// cartilage cloud).
-pub const TIP_STEP_MM: f32 = 12.0;
-/// A tip-extension step must stay within this angle of the rib's direction (cos 40°), so
-/// it never jumps to the neighbouring rib, which lies across the rib.
-const TIP_COS: f32 = 0.766;
-
-/// Walks from the rib end `from` outward (away from `other`) over the live SOM-1 nodes,
-/// each step to the node farthest along the rib direction within [`TIP_STEP_MM`] and
-/// [`TIP_COS`], until no node continues the rib. SOM key points contract away from the
-/// ends of a structure (the map's boundary effect); this recovers the true extent.
-pub fn extend_tip(som1: &[Vec3], from: Vec3, other: Vec3) -> Vec3 {
-    let Some(d) = (from - other).try_normalize(1e-6) else { return from };
-    let mut tip = from;
-    for _ in 0..32 {
-        let next = som1
-            .iter()
-            .filter(|n| {
-                let v = *n - tip;
-                let len = v.norm();
-                len < TIP_STEP_MM && v.dot(&d) > TIP_COS * len && v.dot(&d) > 0.5
-            })
-            .max_by(|a, b| (*a - tip).dot(&d).total_cmp(&(*b - tip).dot(&d)));
-        match next {
-            Some(n) => tip = *n,
-            None => break,
-        }
-    }
-    tip
 }
 
 /// Paper Eq. 4: keep the first two path points, then a point only if the turn from the

@@ -3,9 +3,8 @@
 
 use crate::io::{self, Cloud, Mesh, PlyFormat};
 use crate::phantom::{PhantomConfig, PhantomPair};
-use crate::register::{register_clouds, to_core, to_file, CliError};
+use crate::register::{register_clouds, to_core, to_file, CliError, Method};
 use ribreg_core::error::Cloud as Which;
-use ribreg_core::pipeline::Config;
 use ribreg_core::Vec3;
 use serde_json::json;
 use std::path::Path;
@@ -48,7 +47,12 @@ pub fn paired_errors(a: &[Vec3], truth: &[[f64; 3]]) -> (f64, f64, f64) {
 
 /// Generates the pair for `cfg`, registers it, writes everything into `out`, and returns
 /// the report (also written as `out/report.json`).
-pub fn run_demo(cfg: &PhantomConfig, out: &Path, progress: &mut dyn FnMut(&str)) -> Result<serde_json::Value, CliError> {
+pub fn run_demo(
+    cfg: &PhantomConfig,
+    method: Method,
+    out: &Path,
+    progress: &mut dyn FnMut(&str),
+) -> Result<serde_json::Value, CliError> {
     let t0 = Instant::now();
     let pair = PhantomPair::generate(cfg);
     progress(&format!(
@@ -65,7 +69,7 @@ pub fn run_demo(cfg: &PhantomConfig, out: &Path, progress: &mut dyn FnMut(&str))
     let waypoints = to_core(&pair.template_waypoints, Which::Query)?;
     let labels: Vec<u8> = pair.template.labels.iter().map(|&l| u8::try_from(l).unwrap_or(0)).collect();
     let t1 = Instant::now();
-    let mut outcome = register_clouds(&template, Some(&labels), &target, Some(&waypoints), &Config::default(), progress)?;
+    let mut outcome = register_clouds(&template, Some(&labels), &target, Some(&waypoints), method, progress)?;
     let total_ms = t1.elapsed().as_secs_f64() * 1e3;
     let mapped = outcome.waypoints.clone().unwrap_or_default();
     let (wp_mean, wp_sd, wp_max) = paired_errors(&mapped, &pair.true_waypoints);

@@ -3,7 +3,7 @@
 use clap::{Parser, Subcommand};
 use ribreg_sim::demo;
 use ribreg_sim::phantom::{PhantomConfig, PhantomPair, Variant};
-use ribreg_sim::register::{self, RegisterJob};
+use ribreg_sim::register::{self, Method, RegisterJob};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -42,6 +42,9 @@ enum Command {
         /// Write the output PLY as ASCII (default: binary little-endian).
         #[arg(long)]
         ascii: bool,
+        #[arg(long, value_enum, default_value_t = MethodArg::Improved)]
+        /// `paper`: as published; `improved`: guided ribs + anterior template (needs labels).
+        method: MethodArg,
     },
     /// Write a phantom pair (CT template, US target, waypoints, ground truth) to a folder.
     Phantom {
@@ -58,7 +61,25 @@ enum Command {
         out_dir: PathBuf,
         #[command(flatten)]
         phantom: PhantomArgs,
+        /// `paper`: as published; `improved`: guided ribs + anterior template.
+        #[arg(long, value_enum, default_value_t = MethodArg::Improved)]
+        method: MethodArg,
     },
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum MethodArg {
+    Paper,
+    Improved,
+}
+
+impl From<MethodArg> for Method {
+    fn from(m: MethodArg) -> Method {
+        match m {
+            MethodArg::Paper => Method::Paper,
+            MethodArg::Improved => Method::Improved,
+        }
+    }
 }
 
 #[derive(clap::Args)]
@@ -96,8 +117,8 @@ fn main() -> ExitCode {
         }
     };
     let result = match cli.command {
-        Command::Register { template, target, waypoints, out, out_waypoints, report, ascii } => {
-            let job = RegisterJob { template, target, waypoints, out, out_waypoints, report, ascii };
+        Command::Register { template, target, waypoints, out, out_waypoints, report, ascii, method } => {
+            let job = RegisterJob { template, target, waypoints, out, out_waypoints, report, ascii, method: method.into() };
             register::run(&job, &mut progress).map(|o| {
                 println!(
                     "registered {} points: ED {:.2} ± {:.2} mm (max {:.2}), HD {:.2} mm",
@@ -120,7 +141,7 @@ fn main() -> ExitCode {
                 );
             })
         }
-        Command::Demo { out_dir, phantom } => demo::run_demo(&phantom.config(), &out_dir, &mut progress).map(|r| {
+        Command::Demo { out_dir, phantom, method } => demo::run_demo(&phantom.config(), method.into(), &out_dir, &mut progress).map(|r| {
             let g = &r["ground_truth"];
             println!(
                 "demo: waypoint error {:.2} ± {:.2} mm (max {:.2}), dense error {:.2} mm, \

@@ -7,6 +7,7 @@
 //! under a second, see the README).
 
 use crate::io::{self, Cloud, IoError, PlyFormat};
+use crate::prep;
 use ribreg_core::error::Cloud as Which;
 use ribreg_core::local_rigid::TransformCache;
 use ribreg_core::metrics::{compare, Metrics};
@@ -17,6 +18,36 @@ use serde_json::{json, Value};
 use std::fmt;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+
+/// Which registration to run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Method {
+    /// The paper's method as published (graph rib model, whole template surface).
+    Paper,
+    /// The paper's method with this project's improvements: guided rib model and an
+    /// anterior-surface template (see `ribreg_core::guided` and [`crate::prep`]). Needs a
+    /// labelled template.
+    #[default]
+    Improved,
+}
+
+impl Method {
+    /// The core configuration of the method.
+    pub fn config(self) -> Config {
+        match self {
+            Method::Paper => Config::default(),
+            Method::Improved => Config::improved(),
+        }
+    }
+
+    /// Name used in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Paper => "paper",
+            Method::Improved => "improved",
+        }
+    }
+}
 
 /// Transform cache capacity on the host (distinct 10-neighbour sets kept).
 pub const HOST_CACHE: usize = 1024;
@@ -38,6 +69,8 @@ pub struct RegisterJob {
     pub report: Option<PathBuf>,
     /// Write the output PLY as ASCII instead of binary little-endian.
     pub ascii: bool,
+    /// Which registration to run.
+    pub method: Method,
 }
 
 /// Why a command failed: one line for stderr.
@@ -137,11 +170,22 @@ pub fn register_clouds(
     labels: Option<&[u8]>,
     target: &[Vec3],
     waypoints: Option<&[Vec3]>,
-    cfg: &Config,
+    method: Method,
     progress: &mut dyn FnMut(&str),
 ) -> Result<RegisterOutcome, Error> {
+    let cfg = &method.config();
     let t0 = Instant::now();
-    let tpl = Template::build(template, labels, cfg)?;
+    let tpl = match method {
+        Method::Paper => Template::build(template, labels, cfg)?,
+        Method::Improved => {
+            let mask = prep::anterior_mask(template);
+            let front: Vec<Vec3> = template.iter().zip(&mask).filter(|(_, m)| **m).map(|(p, _)| *p).collect();
+            let front_labels: Option<Vec<u8>> =
+                labels.map(|l| l.iter().zip(&mask).filter(|(_, m)| **m).map(|(l, _)| *l).collect());
+            progress(&format!("template: {} of {} points face the probe", front.len(), template.len()));
+            Template::build(&front, front_labels.as_deref(), cfg)?
+        }
+    };
     let t_template = t0.elapsed();
     progress(&format!(
         "template: {} points -> {} SOM-1 nodes, {} key points, 30 skeleton points ({:.1} ms)",
@@ -191,6 +235,7 @@ pub fn register_clouds(
     ));
     let report = json!({
         "version": 1,
+        "method": method.name(),
         "template": { "points": template.len(), "labelled": labels.is_some() },
         "target": { "points": target.len() },
         "skeleton": skeleton_json(&tpl, &reg),
@@ -291,7 +336,14 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
     }
     let t_read = t0.elapsed();
     progress(&format!("read {} template and {} target points ({:.1} ms)", tpl.len(), tgt.len(), ms(t_read)));
-    let mut outcome = register_clouds(&tpl, labels.as_deref(), &tgt, wps.as_deref(), &Config::default(), progress)?;
+    if job.method == Method::Improved && labels.is_none() {
+        return Err(CliError::Usage(format!(
+            "{}: the improved method needs a labelled template (PLY vertex property `label`); \
+             use --method paper for an unlabelled one",
+            job.template.display()
+        )));
+    }
+    let mut outcome = register_clouds(&tpl, labels.as_deref(), &tgt, wps.as_deref(), job.method, progress)?;
     let t1 = Instant::now();
     let mut written: Vec<&Path> = Vec::new();
     let result = (|| -> Result<(), CliError> {
