@@ -87,13 +87,14 @@ pub enum Error {
         /// Key points carrying that rib's label on that side.
         found: u8,
     },
-    /// Too few points are left on a rib path to fit its curve.
+    /// Too few points are left on a rib (its tree path after the turn filter, or its
+    /// labelled nodes in the guided model) to fit its curve.
     RibPath {
         /// Which cloud.
         cloud: Cloud,
         /// Rib number 2..=5.
         rib: u8,
-        /// Points left after the turn-angle filter.
+        /// Points found for the rib.
         found: u8,
         /// Minimum needed (a line needs 2).
         min: u8,
@@ -156,8 +157,8 @@ impl fmt::Display for Error {
             ),
             Error::RibPath { cloud, rib, found, min } => write!(
                 f,
-                "{cloud} rib {rib} path keeps {found} points after the turn-angle filter, \
-                 at least {min} are needed"
+                "{cloud} rib {rib}: {found} skeleton points found, at least {min} are needed \
+                 to fit its curve (is rib {rib} in the cloud, labelled and seen on both sides?)"
             ),
             Error::RigidFit => f.write_str(
                 "rigid fit failed: the point set is degenerate or the SVD failed its check",
