@@ -37,7 +37,7 @@ pub const LABEL_RADIUS_MM: f32 = 12.0;
 /// Labelling / fitting rounds.
 pub const GUIDED_ROUNDS: usize = 3;
 /// ICP rounds refining the coarse pose on all SOM-1 nodes.
-pub const REFINE_ITERATIONS: usize = 20;
+pub const REFINE_ITERATIONS: usize = 10;
 /// Fewest nodes a rib needs for its curve.
 pub const MIN_RIB_NODES: usize = 4;
 

@@ -7,14 +7,15 @@
 //! weakly, and noise then turns it wildly. The rule: the neighbourhood's spread across
 //! its main direction (standard deviation along its second principal axis) must be at
 //! least [`MIN_CROSS_SPREAD`] of the spread along it; while it is not, the neighbourhood
-//! is widened by the next-nearest skeleton point (up to all 30, whose spread always
-//! covers several ribs). The result is always a well-posed Kabsch problem.
+//! is widened by the skeleton point nearest to its centroid that it does not hold yet (up
+//! to all 30, whose spread always covers several ribs). The result is always a well-posed
+//! Kabsch problem, and it depends on the N_r-set alone.
 //!
 //! # Transform reuse
-//! A neighbourhood is a 30-bit set of skeleton indices. Points with the same set share
-//! one transform: it is fitted once and kept in a [`TransformCache`] (open addressing,
-//! fixed capacity). When the cache is full a transform is still computed, just not kept,
-//! and [`TransformCache::uncached`] counts it.
+//! A neighbourhood is a 30-bit set of skeleton indices. Points with the same N_r-set
+//! share one transform (widening depends on the set only): it is fitted once and kept in
+//! a [`TransformCache`] (open addressing, fixed capacity). When the cache is full a
+//! transform is still computed, just not kept, and [`TransformCache::uncached`] counts it.
 
 use crate::error::{Error, Result};
 use crate::geom::Rigid;
@@ -83,18 +84,20 @@ impl LocalRigid {
         Ok(LocalRigid { source, target, neighbours })
     }
 
-    /// The neighbourhood of `p`: its `N_r` nearest source skeleton points, widened until
-    /// it is not collinear (see the module docs), as a bit set.
+    /// The `N_r` nearest source skeleton points of `p`, as a bit set.
     pub fn neighbourhood(&self, p: &Vec3) -> u32 {
-        let mut order: [(f32, u8); SKELETON_POINTS] =
-            core::array::from_fn(|i| ((self.source[i] - p).norm_squared(), i as u8));
-        order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        let mut mask = 0u32;
-        for (k, &(_, i)) in order.iter().enumerate() {
-            mask |= 1 << i;
-            if k + 1 >= self.neighbours && !self.collinear(mask) {
-                break;
+        nearest_set(&self.source, p, self.neighbours, 0)
+    }
+
+    /// `mask` widened until it is not collinear (see the module docs).
+    pub fn widened(&self, mut mask: u32) -> u32 {
+        while self.collinear(mask) && mask.count_ones() < SKELETON_POINTS as u32 {
+            let mut sum = Vec3::zeros();
+            for i in bits(mask) {
+                sum += self.source[i];
             }
+            let centroid = sum / mask.count_ones() as f32;
+            mask = nearest_set(&self.source, &centroid, 1, mask);
         }
         mask
     }
@@ -137,7 +140,7 @@ impl LocalRigid {
             cache.hits += 1;
             return Ok(*t);
         }
-        let t = self.fit(mask)?;
+        let t = self.fit(self.widened(mask))?;
         cache.fits += 1;
         if cache.map.insert(mask, t).is_err() {
             cache.uncached += 1;
@@ -168,6 +171,17 @@ impl LocalRigid {
     pub fn target(&self) -> &[Vec3; SKELETON_POINTS] {
         &self.target
     }
+}
+
+/// `extra` more indices of `points` nearest to `p` (ties to the lower index) added to `have`.
+fn nearest_set(points: &[Vec3; SKELETON_POINTS], p: &Vec3, extra: usize, have: u32) -> u32 {
+    let mut order: [(f32, u8); SKELETON_POINTS] = core::array::from_fn(|i| ((points[i] - p).norm_squared(), i as u8));
+    order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    let mut mask = have;
+    for &(_, i) in order.iter().filter(|(_, i)| have & (1 << i) == 0).take(extra) {
+        mask |= 1 << i;
+    }
+    mask
 }
 
 fn bits(mask: u32) -> impl Iterator<Item = usize> {
@@ -219,10 +233,13 @@ mod tests {
         }
         let map = LocalRigid::new(src, src, NEIGHBOURS).unwrap();
         let mask = map.neighbourhood(&Vec3::new(0.0, -400.0, 0.0));
-        assert!(mask.count_ones() > NEIGHBOURS as u32);
-        assert!(!map.collinear(mask));
-        // An ordinary point keeps exactly N_r.
-        assert_eq!(map.neighbourhood(&Vec3::new(0.0, -30.0, 0.0)).count_ones(), NEIGHBOURS as u32);
+        assert_eq!(mask, 0x3FF << 20, "the 10 points of the straight rib");
+        let wide = map.widened(mask);
+        assert!(wide.count_ones() > NEIGHBOURS as u32 && wide & mask == mask);
+        assert!(!map.collinear(wide));
+        // An ordinary neighbourhood is not widened.
+        let ordinary = map.neighbourhood(&Vec3::new(0.0, -30.0, 0.0));
+        assert_eq!(map.widened(ordinary), ordinary);
     }
 
     #[test]

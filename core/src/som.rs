@@ -23,7 +23,7 @@ use crate::rng::Rng;
 use crate::Vec3;
 
 /// Points (at most) checked when finding the live nodes of a map.
-pub const LIVE_SAMPLES: usize = 4096;
+pub const LIVE_SAMPLES: usize = 2048;
 
 /// Longest grid side supported (rows or columns).
 pub const MAX_GRID_SIDE: usize = 64;

@@ -188,8 +188,7 @@ pub fn register_clouds(
     };
     let t_template = t0.elapsed();
     progress(&format!(
-        "template: {} points -> {} SOM-1 nodes, {} key points, 30 skeleton points ({:.1} ms)",
-        template.len(),
+        "template: skeleton from {} SOM-1 nodes, {} key points -> 30 rib points ({:.1} ms)",
         tpl.graph.som1.len(),
         tpl.graph.key_points.len(),
         ms(t_template)
@@ -198,9 +197,9 @@ pub fn register_clouds(
     let reg = register(&tpl, target, cfg)?;
     let t_register = t1.elapsed();
     progress(&format!(
-        "target: {} points -> skeleton, endpoints matched (rms {:.1} mm) ({:.1} ms)",
+        "target: {} points -> 30 rib points paired with the template's, rigid part {:.1}° ({:.1} ms)",
         target.len(),
-        reg.matching.map_or(0.0, |m| m.endpoint_rms),
+        reg.pose.angle_deg(),
         ms(t_register)
     ));
     let t2 = Instant::now();
