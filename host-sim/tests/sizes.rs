@@ -1,0 +1,30 @@
+//! Size report of the core's working state (the README's memory table comes from
+//! `cargo test -p ribreg-sim --test sizes -- --nocapture`). Goal: one registration's
+//! state under 64 KiB.
+
+use core::mem::size_of;
+use ribreg_core::local_rigid::{TransformCache, CACHE_CAPACITY};
+use ribreg_core::pipeline::{Registration, Template};
+use ribreg_core::skeleton::{SkeletonGraph, SOM1_CAPACITY};
+use ribreg_core::som::Som;
+use ribreg_core::Vec3;
+
+#[test]
+fn working_state_fits_64_kib() {
+    let rows = [
+        ("Template (CT skeleton, kept for every patient)", size_of::<Template>()),
+        ("Registration (target graph, skeleton, mapping)", size_of::<Registration>()),
+        ("TransformCache<128> (mapping)", size_of::<TransformCache<CACHE_CAPACITY>>()),
+        ("SkeletonGraph (one inside each of the two above)", size_of::<SkeletonGraph>()),
+        ("transient: SOM-1 map being trained", size_of::<Som<SOM1_CAPACITY>>()),
+        ("transient: ICP pairing buffer", SOM1_CAPACITY * size_of::<Vec3>()),
+        ("transient: carried template nodes (guided)", SOM1_CAPACITY * size_of::<Vec3>()),
+    ];
+    for (name, bytes) in rows {
+        println!("{name:50} {bytes:6} B  {:5.1} KiB", bytes as f64 / 1024.0);
+    }
+    let kept = size_of::<Template>() + size_of::<Registration>() + size_of::<TransformCache<CACHE_CAPACITY>>();
+    let transient = size_of::<Som<SOM1_CAPACITY>>() + 2 * SOM1_CAPACITY * size_of::<Vec3>();
+    println!("{:50} {:6} B  {:5.1} KiB", "total (kept + largest transient)", kept + transient, (kept + transient) as f64 / 1024.0);
+    assert!(kept + transient < 64 * 1024);
+}
