@@ -2,9 +2,12 @@
 //! job: build the default phantom pair, register it, compare with the ground truth).
 
 use crate::io::{self, Cloud, Mesh, PlyFormat};
+use crate::plot::{self, SkeletonPanels};
 use crate::phantom::{PhantomConfig, PhantomPair};
 use crate::register::{register_clouds, to_core, to_file, CliError, Method};
 use ribreg_core::error::Cloud as Which;
+use ribreg_core::geom::Rigid;
+use ribreg_core::skeleton::{RibSkeleton, SkeletonGraph, RIB_SAMPLES};
 use ribreg_core::Vec3;
 use serde_json::json;
 use std::path::Path;
@@ -89,6 +92,76 @@ pub fn run_demo(
     io::write_points_csv(&out.join("mapped_waypoints.csv"), &to_file(&mapped))?;
     let text = serde_json::to_string_pretty(&outcome.report).map_err(|e| CliError::Usage(format!("report: {e}")))?;
     io::write_text(&out.join("report.json"), &text)?;
-    progress(&format!("wrote {}", out.display()));
+    write_figures(out, &template, &target, &outcome, &pair.true_waypoints)?;
+    progress(&format!("wrote {} (registered.ply, mapped_waypoints.csv, report.json, figures)", out.display()));
     Ok(outcome.report)
+}
+
+/// Coronal (x, y) projection of points in the template's patient frame.
+fn coronal(points: &[Vec3]) -> Vec<[f64; 2]> {
+    points.iter().map(|p| [f64::from(p.x), f64::from(p.y)]).collect()
+}
+
+/// The paper's Fig. 4 for one cloud: SOM 1, SOM 2, MST with endpoints, rib paths and
+/// the 30 skeleton points, projected on the template's coronal plane (`to_patient` takes
+/// the cloud's frame there).
+fn skeleton_panels(cloud: &[Vec3], graph: &SkeletonGraph, skeleton: &RibSkeleton, to_patient: &Rigid) -> SkeletonPanels {
+    let moved = |pts: &[Vec3]| -> Vec<Vec3> { pts.iter().map(|p| to_patient.apply(p)).collect() };
+    let key = moved(&graph.key_points);
+    let mut offset = 0;
+    let rib_paths = RIB_SAMPLES
+        .iter()
+        .zip(&skeleton.paths)
+        .map(|(&n, path)| {
+            let line = if path.is_empty() {
+                moved(&skeleton.points[offset..offset + n])
+            } else {
+                path.iter().map(|&k| key[usize::from(k)]).collect()
+            };
+            offset += n;
+            coronal(&line)
+        })
+        .collect();
+    SkeletonPanels {
+        cloud: coronal(&moved(cloud)),
+        som1: coronal(&moved(&graph.som1)),
+        key_points: coronal(&key),
+        edges: graph.tree.edges().collect(),
+        endpoints: graph.endpoints.map(|e| e.iter().flatten().map(|&k| usize::from(k)).collect()).unwrap_or_default(),
+        rib_paths,
+        skeleton: coronal(&moved(&skeleton.points)),
+    }
+}
+
+/// Writes `skeleton_template`, `skeleton_target` and `waypoints` figures (SVG + PNG).
+fn write_figures(
+    out: &Path,
+    template: &[Vec3],
+    target: &[Vec3],
+    outcome: &crate::register::RegisterOutcome,
+    truth: &[[f64; 3]],
+) -> Result<(), CliError> {
+    let fig = |e: plot::PlotError| CliError::Usage(format!("figure: {e}"));
+    let tpl = &outcome.template;
+    let reg = &outcome.registration;
+    let panels = skeleton_panels(template, &tpl.graph, &tpl.skeleton, &Rigid::identity());
+    plot::skeleton_figure(&out.join("skeleton_template"), "CT template skeleton (patient frame)", &panels).map_err(fig)?;
+    let panels = skeleton_panels(target, &reg.graph, &reg.skeleton, &reg.pose);
+    plot::skeleton_figure(&out.join("skeleton_target"), "US target skeleton (rigidly aligned to the template)", &panels)
+        .map_err(fig)?;
+    // Waypoint transfer in the target frame, seen from the template's coronal plane.
+    let view = |p: &Vec3| {
+        let q = reg.pose.apply(p);
+        [f64::from(q.x), f64::from(q.y)]
+    };
+    let truth_v: Vec<Vec3> = truth.iter().map(|t| Vec3::new(t[0] as f32, t[1] as f32, t[2] as f32)).collect();
+    let mapped = outcome.waypoints.clone().unwrap_or_default();
+    plot::waypoint_transfer(
+        &out.join("waypoints"),
+        "Planned waypoints mapped onto the patient",
+        &target.iter().map(view).collect::<Vec<_>>(),
+        &truth_v.iter().map(view).collect::<Vec<_>>(),
+        &[plot::WaypointSet { label: "ribreg".into(), points: mapped.iter().map(view).collect() }],
+    )
+    .map_err(fig)
 }

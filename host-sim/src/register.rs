@@ -161,6 +161,10 @@ pub struct RegisterOutcome {
     pub metrics: Metrics,
     /// The JSON report.
     pub report: Value,
+    /// The prepared template (for plots and diagnostics).
+    pub template: Box<Template>,
+    /// The registration (for plots and diagnostics).
+    pub registration: Box<Registration>,
 }
 
 /// Registers already-loaded clouds (no file I/O): the shared core of `register` and
@@ -265,7 +269,14 @@ pub fn register_clouds(
             "metrics": ms(t_metrics),
         },
     });
-    Ok(RegisterOutcome { registered, waypoints: mapped_wp, metrics, report })
+    Ok(RegisterOutcome {
+        registered,
+        waypoints: mapped_wp,
+        metrics,
+        report,
+        template: Box::new(tpl),
+        registration: Box::new(reg),
+    })
 }
 
 fn skeleton_json(tpl: &Template, reg: &Registration) -> Value {

@@ -46,7 +46,9 @@ pub const WAYPOINT_WIDTH: u32 = 1200;
 pub enum PlotError {
     /// Writing `path` failed.
     Io {
+        /// The file being written.
         path: PathBuf,
+        /// What the OS said.
         source: std::io::Error,
     },
     /// The SVG could not be rasterised (a bug in this module if it ever happens).
@@ -76,7 +78,9 @@ impl std::error::Error for PlotError {
 /// One method's values (e.g. per-waypoint errors in mm).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Series {
+    /// Method name shown under its box.
     pub label: String,
+    /// The values, mm.
     pub values: Vec<f64>,
 }
 
@@ -103,7 +107,9 @@ pub struct SkeletonPanels {
 /// Waypoints mapped by one method, index-matched with the true waypoints.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct WaypointSet {
+    /// Method name shown in the legend.
     pub label: String,
+    /// Mapped waypoints, projected to 2-D (mm).
     pub points: Vec<[f64; 2]>,
 }
 
