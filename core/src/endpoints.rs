@@ -42,10 +42,20 @@ pub struct EndpointMatch {
 }
 
 /// Matches the endpoints of `target` to those of `template` whose rib order is `ends`.
-pub fn match_endpoints(target: &SkeletonGraph, template: &SkeletonGraph, ends: &RibEnds) -> Result<EndpointMatch> {
-    let (coarse, coarse_rms) = coarse_pose(&target.key_points, &target.frame, &template.key_points, &template.frame)?;
+pub fn match_endpoints(
+    target: &SkeletonGraph,
+    template: &SkeletonGraph,
+    ends: &RibEnds,
+) -> Result<EndpointMatch> {
+    let (coarse, coarse_rms) = coarse_pose(
+        &target.key_points,
+        &target.frame,
+        &template.key_points,
+        &template.frame,
+    )?;
     // Template endpoints in slot order k = 2·rib + side.
-    let ct: [Vec3; 8] = core::array::from_fn(|k| template.key_points[usize::from(ends.0[k / 2][k % 2])]);
+    let ct: [Vec3; 8] =
+        core::array::from_fn(|k| template.key_points[usize::from(ends.0[k / 2][k % 2])]);
     let found = target.endpoints?;
     let us_idx: [u8; 8] = core::array::from_fn(|k| found[k / 4][k % 4]);
     let us: [Vec3; 8] = us_idx.map(|i| target.key_points[usize::from(i)]);
@@ -54,7 +64,8 @@ pub fn match_endpoints(target: &SkeletonGraph, template: &SkeletonGraph, ends: &
     let mut rms = f32::INFINITY;
     for _ in 0..ENDPOINT_ITERATIONS {
         let moved = us.map(|p| pose.apply(&p));
-        let cost: [[f32; 8]; 8] = core::array::from_fn(|i| core::array::from_fn(|j| (moved[i] - ct[j]).norm_squared()));
+        let cost: [[f32; 8]; 8] =
+            core::array::from_fn(|i| core::array::from_fn(|j| (moved[i] - ct[j]).norm_squared()));
         let (next, total) = best_assignment(&cost);
         rms = libm::sqrtf(total / 8.0);
         if next == assign {
@@ -68,7 +79,12 @@ pub fn match_endpoints(target: &SkeletonGraph, template: &SkeletonGraph, ends: &
     for (i, &slot) in assign.iter().enumerate() {
         out[usize::from(slot) / 2][usize::from(slot) % 2] = us_idx[i];
     }
-    Ok(EndpointMatch { ends: RibEnds(out), pose, coarse_rms, endpoint_rms: rms })
+    Ok(EndpointMatch {
+        ends: RibEnds(out),
+        pose,
+        coarse_rms,
+        endpoint_rms: rms,
+    })
 }
 
 /// Rigid pose taking `src` onto `dst` from five starts (see the module docs), whatever
@@ -79,7 +95,10 @@ pub fn coarse_pose(src: &[Vec3], fs: &Frame, dst: &[Vec3], fd: &Frame) -> Result
         let rotation = if start == 0 {
             Matrix3::identity()
         } else {
-            let (s1, s2) = (if start & 1 == 1 { 1.0 } else { -1.0 }, if start & 2 == 2 { 1.0 } else { -1.0 });
+            let (s1, s2) = (
+                if start & 1 == 1 { 1.0 } else { -1.0 },
+                if start & 2 == 2 { 1.0 } else { -1.0 },
+            );
             let mut axes = fs.axes;
             axes.set_column(0, &(fs.axes.column(0) * s1));
             axes.set_column(1, &(fs.axes.column(1) * s2));
@@ -87,7 +106,10 @@ pub fn coarse_pose(src: &[Vec3], fs: &Frame, dst: &[Vec3], fd: &Frame) -> Result
             axes.set_column(2, &third);
             fd.axes * axes.transpose()
         };
-        let init = Rigid { rotation, translation: fd.origin - rotation * fs.origin };
+        let init = Rigid {
+            rotation,
+            translation: fd.origin - rotation * fs.origin,
+        };
         let (pose, rms) = icp(src, dst, init, COARSE_ITERATIONS)?;
         if best.is_none_or(|(_, b)| rms < b) {
             best = Some((pose, rms));
@@ -104,7 +126,9 @@ pub const ICP_CAPACITY: usize = crate::skeleton::SOM1_CAPACITY;
 /// `iterations` rounds; returns the pose and the RMS of the last pairing.
 pub fn icp(src: &[Vec3], dst: &[Vec3], mut pose: Rigid, iterations: usize) -> Result<(Rigid, f32)> {
     if src.len() > ICP_CAPACITY {
-        return Err(crate::error::Error::Capacity { capacity: ICP_CAPACITY as u32 });
+        return Err(crate::error::Error::Capacity {
+            capacity: ICP_CAPACITY as u32,
+        });
     }
     let mut rms = f32::INFINITY;
     for _ in 0..iterations {
@@ -125,7 +149,14 @@ pub fn icp(src: &[Vec3], dst: &[Vec3], mut pose: Rigid, iterations: usize) -> Re
 /// Optimal one-to-one assignment for an 8×8 cost matrix: `assign[i]` is the column of
 /// row `i`; returns it with its total cost. Depth-first search with pruning.
 pub fn best_assignment(cost: &[[f32; 8]; 8]) -> ([u8; 8], f32) {
-    fn go(cost: &[[f32; 8]; 8], row: usize, used: u8, acc: f32, cur: &mut [u8; 8], best: &mut ([u8; 8], f32)) {
+    fn go(
+        cost: &[[f32; 8]; 8],
+        row: usize,
+        used: u8,
+        acc: f32,
+        cur: &mut [u8; 8],
+        best: &mut ([u8; 8], f32),
+    ) {
         if acc >= best.1 {
             return;
         }
@@ -136,13 +167,23 @@ pub fn best_assignment(cost: &[[f32; 8]; 8]) -> ([u8; 8], f32) {
         for col in 0..8 {
             if used & (1 << col) == 0 {
                 cur[row] = col as u8;
-                go(cost, row + 1, used | (1 << col), acc + cost[row][col], cur, best);
+                go(
+                    cost,
+                    row + 1,
+                    used | (1 << col),
+                    acc + cost[row][col],
+                    cur,
+                    best,
+                );
             }
         }
     }
     // Start from the diagonal so the bound is finite from the first leaf on.
     let diag: f32 = (0..8).map(|i| cost[i][i]).sum();
-    let mut best = ([0, 1, 2, 3, 4, 5, 6, 7], if diag.is_finite() { diag } else { f32::MAX });
+    let mut best = (
+        [0, 1, 2, 3, 4, 5, 6, 7],
+        if diag.is_finite() { diag } else { f32::MAX },
+    );
     let mut cur = [0u8; 8];
     go(cost, 0, 0, 0.0, &mut cur, &mut best);
     best
@@ -155,8 +196,15 @@ mod tests {
     #[test]
     fn assignment_finds_the_permutation() {
         let perm = [3u8, 0, 7, 1, 6, 2, 5, 4];
-        let cost: [[f32; 8]; 8] =
-            core::array::from_fn(|i| core::array::from_fn(|j| if perm[i] as usize == j { 0.1 } else { 1.0 + (i * j) as f32 }));
+        let cost: [[f32; 8]; 8] = core::array::from_fn(|i| {
+            core::array::from_fn(|j| {
+                if perm[i] as usize == j {
+                    0.1
+                } else {
+                    1.0 + (i * j) as f32
+                }
+            })
+        });
         let (a, total) = best_assignment(&cost);
         assert_eq!(a, perm);
         assert!((total - 0.8).abs() < 1e-5);

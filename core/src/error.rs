@@ -78,13 +78,14 @@ pub enum Error {
         /// Endpoints needed per side (one per rib).
         expected: u8,
     },
-    /// The template's rib labels leave a rib without key points on one side.
+    /// The template's rib labels do not give each rib 2..5 exactly one endpoint (or, in
+    /// the guided model, at least one node) per side.
     RibOrder {
         /// Side (0 or 1).
         side: u8,
         /// The rib number (2..=5) that is missing or repeated.
         rib: u8,
-        /// Key points carrying that rib's label on that side.
+        /// Endpoints (guided model: nodes) carrying that rib's label on that side.
         found: u8,
     },
     /// Too few points are left on a rib (its tree path after the turn filter, or its
@@ -152,8 +153,8 @@ impl fmt::Display for Error {
             ),
             Error::RibOrder { side, rib, found } => write!(
                 f,
-                "template labels give rib {rib} {found} skeleton key points on side {side}, \
-                 expected at least 1 (are ribs 2..5 all labelled on both sides?)"
+                "template labels give rib {rib} {found} endpoints on side {side}, expected exactly 1 \
+                 (are ribs 2..5 all labelled on both sides?)"
             ),
             Error::RibPath { cloud, rib, found, min } => write!(
                 f,

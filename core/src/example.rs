@@ -33,7 +33,10 @@ pub fn cage(stretch: f32) -> impl Iterator<Item = Vec3> {
         let y = 12.0 - STEP * j as f32;
         (0..9).flat_map(move |i| {
             let x = -STERNUM_HALF_WIDTH + 26.0 * i as f32 / 8.0;
-            [Vec3::new(x, y, chest_z(x) + 4.0), Vec3::new(x, y, chest_z(x) - 4.0)]
+            [
+                Vec3::new(x, y, chest_z(x) + 4.0),
+                Vec3::new(x, y, chest_z(x) - 4.0),
+            ]
         })
     });
     let ribs = (0..8).flat_map(move |k| {
@@ -47,7 +50,11 @@ pub fn cage(stretch: f32) -> impl Iterator<Item = Vec3> {
             let z = chest_z(x);
             (0..AROUND).map(move |a| {
                 let phi = a as f32 * core::f32::consts::TAU / AROUND as f32;
-                Vec3::new(x, y + RADIUS * libm::cosf(phi), z + RADIUS * libm::sinf(phi))
+                Vec3::new(
+                    x,
+                    y + RADIUS * libm::cosf(phi),
+                    z + RADIUS * libm::sinf(phi),
+                )
             })
         })
     });

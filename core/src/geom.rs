@@ -10,17 +10,31 @@ use nalgebra::{Matrix3, SymmetricEigen};
 pub fn validate(points: &[Vec3], cloud: Cloud, min: usize, max: usize) -> Result<()> {
     let n = points.len();
     if n < min {
-        return Err(Error::TooFewPoints { cloud, found: sat_u32(n), min: sat_u32(min) });
+        return Err(Error::TooFewPoints {
+            cloud,
+            found: sat_u32(n),
+            min: sat_u32(min),
+        });
     }
     if n > max {
-        return Err(Error::TooManyPoints { cloud, found: sat_u32(n), max: sat_u32(max) });
+        return Err(Error::TooManyPoints {
+            cloud,
+            found: sat_u32(n),
+            max: sat_u32(max),
+        });
     }
     for (i, p) in points.iter().enumerate() {
         if p.iter().any(|c| !c.is_finite()) {
-            return Err(Error::NonFinite { cloud, index: sat_u32(i) });
+            return Err(Error::NonFinite {
+                cloud,
+                index: sat_u32(i),
+            });
         }
         if p.iter().any(|c| c.abs() > MAX_COORD_MM) {
-            return Err(Error::OutOfRange { cloud, index: sat_u32(i) });
+            return Err(Error::OutOfRange {
+                cloud,
+                index: sat_u32(i),
+            });
         }
     }
     Ok(())
@@ -104,7 +118,11 @@ impl Frame {
         }
         let first = axes.column(1).cross(&axes.column(2));
         axes.set_column(0, &first);
-        Some(Frame { origin, axes, spread })
+        Some(Frame {
+            origin,
+            axes,
+            spread,
+        })
     }
 
     /// Flips axes so that the first points along `+x` and the second along `+y` of the
@@ -145,12 +163,24 @@ pub struct Rigid {
 impl Rigid {
     /// The identity.
     pub fn identity() -> Rigid {
-        Rigid { rotation: Matrix3::identity(), translation: Vec3::zeros() }
+        Rigid {
+            rotation: Matrix3::identity(),
+            translation: Vec3::zeros(),
+        }
     }
 
     /// Applies the transform to a point.
     pub fn apply(&self, p: &Vec3) -> Vec3 {
         self.rotation * p + self.translation
+    }
+
+    /// The inverse transform.
+    pub fn inverse(&self) -> Rigid {
+        let rt = self.rotation.transpose();
+        Rigid {
+            rotation: rt,
+            translation: -(rt * self.translation),
+        }
     }
 
     /// `self ∘ first`: apply `first`, then `self`.
@@ -186,22 +216,36 @@ mod tests {
         assert_eq!(validate(&pts, Cloud::Target, 1, 10), Ok(()));
         assert_eq!(
             validate(&pts, Cloud::Target, 6, 10),
-            Err(Error::TooFewPoints { cloud: Cloud::Target, found: 5, min: 6 })
+            Err(Error::TooFewPoints {
+                cloud: Cloud::Target,
+                found: 5,
+                min: 6
+            })
         );
         assert_eq!(
             validate(&pts, Cloud::Target, 1, 4),
-            Err(Error::TooManyPoints { cloud: Cloud::Target, found: 5, max: 4 })
+            Err(Error::TooManyPoints {
+                cloud: Cloud::Target,
+                found: 5,
+                max: 4
+            })
         );
         pts[3].y = f32::NAN;
         pts[4].x = 1e9;
         assert_eq!(
             validate(&pts, Cloud::Template, 1, 10),
-            Err(Error::NonFinite { cloud: Cloud::Template, index: 3 })
+            Err(Error::NonFinite {
+                cloud: Cloud::Template,
+                index: 3
+            })
         );
         pts[3].y = 0.0;
         assert_eq!(
             validate(&pts, Cloud::Template, 1, 10),
-            Err(Error::OutOfRange { cloud: Cloud::Template, index: 4 })
+            Err(Error::OutOfRange {
+                cloud: Cloud::Template,
+                index: 4
+            })
         );
     }
 

@@ -20,7 +20,9 @@ fn cross(o: &Vec2, a: &Vec2, b: &Vec2) -> f32 {
 pub fn gift_wrap<const H: usize>(points: &[Vec2], out: &mut heapless::Vec<u16, H>) -> Result<()> {
     out.clear();
     if points.len() > usize::from(u16::MAX) {
-        return Err(Error::Capacity { capacity: u32::from(u16::MAX) });
+        return Err(Error::Capacity {
+            capacity: u32::from(u16::MAX),
+        });
     }
     let Some(start) = (0..points.len()).min_by(|&a, &b| {
         let (p, q) = (points[a], points[b]);
@@ -31,7 +33,8 @@ pub fn gift_wrap<const H: usize>(points: &[Vec2], out: &mut heapless::Vec<u16, H
     let mut p = start;
     // A hull has at most n vertices: the bound only guards against rounding loops.
     for _ in 0..=points.len() {
-        out.push(p as u16).map_err(|_| Error::Capacity { capacity: H as u32 })?;
+        out.push(p as u16)
+            .map_err(|_| Error::Capacity { capacity: H as u32 })?;
         let mut q = usize::MAX;
         for r in 0..points.len() {
             if points[r] == points[p] {
@@ -42,7 +45,8 @@ pub fn gift_wrap<const H: usize>(points: &[Vec2], out: &mut heapless::Vec<u16, H
                 continue;
             }
             let c = cross(&points[p], &points[q], &points[r]);
-            let farther = (points[r] - points[p]).norm_squared() > (points[q] - points[p]).norm_squared();
+            let farther =
+                (points[r] - points[p]).norm_squared() > (points[q] - points[p]).norm_squared();
             if c < 0.0 || (c == 0.0 && farther) {
                 q = r;
             }
@@ -52,7 +56,9 @@ pub fn gift_wrap<const H: usize>(points: &[Vec2], out: &mut heapless::Vec<u16, H
         }
         p = q;
     }
-    Err(Error::Config("gift wrapping did not close (non-finite coordinates?)"))
+    Err(Error::Config(
+        "gift wrapping did not close (non-finite coordinates?)",
+    ))
 }
 
 #[cfg(test)]
@@ -82,11 +88,22 @@ mod tests {
         assert!(out.is_empty());
         gift_wrap(&[Vec2::new(1.0, 1.0); 3], &mut out).unwrap();
         assert_eq!(out.as_slice(), &[0]);
-        let line = [Vec2::new(0.0, 0.0), Vec2::new(1.0, 1.0), Vec2::new(2.0, 2.0)];
+        let line = [
+            Vec2::new(0.0, 0.0),
+            Vec2::new(1.0, 1.0),
+            Vec2::new(2.0, 2.0),
+        ];
         gift_wrap(&line, &mut out).unwrap();
         assert_eq!(out.as_slice(), &[0, 2]);
         let mut small = heapless::Vec::<u16, 2>::new();
-        let tri = [Vec2::new(0.0, 0.0), Vec2::new(1.0, 0.0), Vec2::new(0.0, 1.0)];
-        assert_eq!(gift_wrap(&tri, &mut small), Err(Error::Capacity { capacity: 2 }));
+        let tri = [
+            Vec2::new(0.0, 0.0),
+            Vec2::new(1.0, 0.0),
+            Vec2::new(0.0, 1.0),
+        ];
+        assert_eq!(
+            gift_wrap(&tri, &mut small),
+            Err(Error::Capacity { capacity: 2 })
+        );
     }
 }

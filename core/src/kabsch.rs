@@ -9,6 +9,12 @@
 //! computed again by Horn's quaternion method (largest eigenvector of the symmetric 4×4
 //! matrix built from `H`), which needs no SVD; if that too fails, [`Error::RigidFit`].
 //!
+//! Centroids, `H`, the SVD and the rotation are computed in `f64` (the inputs are `f32`):
+//! an `f32` SVD of a nearly collinear set loses the rotation about the line to rounding
+//! (its reconstruction error hides below any useful check), and `H` of points far from
+//! the origin loses digits to cancellation. About a hundred fits per registration make
+//! the soft-float cost on the Cortex-M4F small.
+//!
 //! Accuracy contract (tested against scipy `Rotation.align_vectors` golden vectors):
 //! rotation within 1e-4 (max abs element) and translation within 1e-3 mm for point sets
 //! of extent 10–300 mm.
@@ -18,10 +24,13 @@ use crate::geom::Rigid;
 use crate::Vec3;
 use nalgebra::{Matrix3, Matrix4, SymmetricEigen, Vector4, SVD};
 
-/// Relative tolerance of the SVD reconstruction check `‖U S Vᵀ − H‖ ≤ tol ‖H‖`.
-const SVD_RECONSTRUCTION_TOL: f32 = 1e-3;
-/// Tolerance of the orthonormality check `‖RᵀR − I‖_max`.
-const ORTHO_TOL: f32 = 1e-3;
+/// Relative tolerance of the SVD reconstruction check `‖U S Vᵀ − H‖ ≤ tol ‖H‖` (f64).
+const SVD_RECONSTRUCTION_TOL: f64 = 1e-9;
+/// Tolerance of the orthonormality check `‖RᵀR − I‖_max` (f64).
+const ORTHO_TOL: f64 = 1e-9;
+
+type M3 = Matrix3<f64>;
+type V3 = nalgebra::Vector3<f64>;
 
 /// Best rigid transform taking `a[i]` onto `b[i]`. Needs equal, non-zero lengths and a
 /// non-degenerate `a` (not all points coincident).
@@ -30,14 +39,14 @@ pub fn fit(a: &[Vec3], b: &[Vec3]) -> Result<Rigid> {
     if n == 0 || n != b.len() {
         return Err(Error::RigidFit);
     }
-    let ca = centroid(a);
-    let cb = centroid(b);
-    let mut h = Matrix3::<f32>::zeros();
+    let ca = centroid64(a);
+    let cb = centroid64(b);
+    let mut h = M3::zeros();
     for (p, q) in a.iter().zip(b) {
-        h += (p - ca) * (q - cb).transpose();
+        h += (p.cast::<f64>() - ca) * (q.cast::<f64>() - cb).transpose();
     }
     let scale = h.abs().max();
-    if !scale.is_finite() || scale <= f32::MIN_POSITIVE {
+    if !scale.is_finite() || scale <= 1e-12 * (1.0 + ca.norm_squared()) {
         return Err(Error::RigidFit);
     }
     // Normalise H: the rotation does not depend on its scale, and the check gets easier.
@@ -45,16 +54,25 @@ pub fn fit(a: &[Vec3], b: &[Vec3]) -> Result<Rigid> {
     let rotation = rotation_svd(&h)
         .or_else(|| rotation_horn(&h))
         .ok_or(Error::RigidFit)?;
-    Ok(Rigid { rotation, translation: cb - rotation * ca })
+    let translation = cb - rotation * ca;
+    Ok(Rigid {
+        rotation: rotation.cast::<f32>(),
+        translation: translation.cast::<f32>(),
+    })
 }
 
-/// Mean of a non-empty slice.
+/// Mean of a slice (zero for an empty one).
 pub fn centroid(points: &[Vec3]) -> Vec3 {
     let sum = points.iter().fold(Vec3::zeros(), |s, p| s + p);
     sum / points.len().max(1) as f32
 }
 
-fn rotation_svd(h: &Matrix3<f32>) -> Option<Matrix3<f32>> {
+fn centroid64(points: &[Vec3]) -> V3 {
+    let sum = points.iter().fold(V3::zeros(), |s, p| s + p.cast::<f64>());
+    sum / points.len().max(1) as f64
+}
+
+fn rotation_svd(h: &M3) -> Option<M3> {
     let svd = SVD::new(*h, true, true);
     let (u, v_t) = (svd.u?, svd.v_t?);
     let rebuilt = u * Matrix3::from_diagonal(&svd.singular_values) * v_t;
@@ -63,13 +81,13 @@ fn rotation_svd(h: &Matrix3<f32>) -> Option<Matrix3<f32>> {
     }
     let v = v_t.transpose();
     let d = (v * u.transpose()).determinant().signum();
-    let r = v * Matrix3::from_diagonal(&Vec3::new(1.0, 1.0, d)) * u.transpose();
+    let r = v * M3::from_diagonal(&V3::new(1.0, 1.0, d)) * u.transpose();
     is_rotation(&r).then_some(r)
 }
 
 /// Horn (1987): the unit quaternion maximising `Σ (R aᵢ)·bᵢ` is the eigenvector of the
 /// largest eigenvalue of a symmetric 4×4 matrix of the entries of `H`.
-fn rotation_horn(h: &Matrix3<f32>) -> Option<Matrix3<f32>> {
+fn rotation_horn(h: &M3) -> Option<M3> {
     let (sxx, sxy, sxz) = (h[(0, 0)], h[(0, 1)], h[(0, 2)]);
     let (syx, syy, syz) = (h[(1, 0)], h[(1, 1)], h[(1, 2)]);
     let (szx, szy, szz) = (h[(2, 0)], h[(2, 1)], h[(2, 2)]);
@@ -82,10 +100,10 @@ fn rotation_horn(h: &Matrix3<f32>) -> Option<Matrix3<f32>> {
     );
     let eig = SymmetricEigen::new(n);
     let k = eig.eigenvalues.imax();
-    let q: Vector4<f32> = eig.eigenvectors.column(k).normalize();
+    let q: Vector4<f64> = eig.eigenvectors.column(k).normalize();
     let (w, x, y, z) = (q[0], q[1], q[2], q[3]);
     #[rustfmt::skip]
-    let r = Matrix3::new(
+    let r = M3::new(
         w * w + x * x - y * y - z * z, 2.0 * (x * y - w * z),         2.0 * (x * z + w * y),
         2.0 * (x * y + w * z),         w * w - x * x + y * y - z * z, 2.0 * (y * z - w * x),
         2.0 * (x * z - w * y),         2.0 * (y * z + w * x),         w * w - x * x - y * y + z * z,
@@ -93,9 +111,11 @@ fn rotation_horn(h: &Matrix3<f32>) -> Option<Matrix3<f32>> {
     is_rotation(&r).then_some(r)
 }
 
-fn is_rotation(r: &Matrix3<f32>) -> bool {
-    let ortho = (r.transpose() * r - Matrix3::identity()).abs().max();
-    ortho <= ORTHO_TOL && (r.determinant() - 1.0).abs() <= ORTHO_TOL && r.iter().all(|v| v.is_finite())
+fn is_rotation(r: &M3) -> bool {
+    let ortho = (r.transpose() * r - M3::identity()).abs().max();
+    ortho <= ORTHO_TOL
+        && (r.determinant() - 1.0).abs() <= ORTHO_TOL
+        && r.iter().all(|v| v.is_finite())
 }
 
 #[cfg(test)]
@@ -106,7 +126,11 @@ mod tests {
     fn cloud() -> [Vec3; 10] {
         core::array::from_fn(|i| {
             let t = i as f32;
-            Vec3::new(10.0 * t, 30.0 * (t * 0.7).sin(), 20.0 * (t * 1.3).cos() + 0.5 * t * t)
+            Vec3::new(
+                10.0 * t,
+                30.0 * (t * 0.7).sin(),
+                20.0 * (t * 1.3).cos() + 0.5 * t * t,
+            )
         })
     }
 
@@ -126,17 +150,17 @@ mod tests {
         let a = cloud();
         let rot = Rotation3::from_euler_angles(0.3, -1.1, 2.9);
         let b: [Vec3; 10] = core::array::from_fn(|i| rot * a[i]);
-        let ca = centroid(&a);
-        let cb = centroid(&b);
-        let mut h = Matrix3::zeros();
+        let ca = centroid64(&a);
+        let cb = centroid64(&b);
+        let mut h = M3::zeros();
         for (p, q) in a.iter().zip(&b) {
-            h += (p - ca) * (q - cb).transpose();
+            h += (p.cast::<f64>() - ca) * (q.cast::<f64>() - cb).transpose();
         }
         let h = h / h.abs().max();
         let r1 = rotation_svd(&h).unwrap();
         let r2 = rotation_horn(&h).unwrap();
-        assert!((r1 - r2).abs().max() < 1e-4);
-        assert!((r1 - rot.matrix()).abs().max() < 1e-4);
+        assert!((r1 - r2).abs().max() < 1e-9);
+        assert!((r1.cast::<f32>() - rot.matrix()).abs().max() < 1e-5);
     }
 
     #[test]

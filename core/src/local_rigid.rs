@@ -17,8 +17,8 @@
 //! a [`TransformCache`] (open addressing, fixed capacity). When the cache is full a
 //! transform is still computed, just not kept, and [`TransformCache::uncached`] counts it.
 
-use crate::error::{Error, Result};
-use crate::geom::Rigid;
+use crate::error::{Cloud, Error, Result};
+use crate::geom::{validate, Rigid};
 use crate::kabsch;
 use crate::skeleton::SKELETON_POINTS;
 use crate::Vec3;
@@ -52,7 +52,12 @@ impl<const CAP: usize> Default for TransformCache<CAP> {
 impl<const CAP: usize> TransformCache<CAP> {
     /// An empty cache.
     pub const fn new() -> Self {
-        TransformCache { map: heapless::index_map::FnvIndexMap::new(), hits: 0, fits: 0, uncached: 0 }
+        TransformCache {
+            map: heapless::index_map::FnvIndexMap::new(),
+            hits: 0,
+            fits: 0,
+            uncached: 0,
+        }
     }
 
     /// Distinct neighbourhoods kept.
@@ -77,11 +82,19 @@ pub struct LocalRigid {
 impl LocalRigid {
     /// Mapping from `source` (template skeleton) to `target` (target skeleton), `N_r =
     /// neighbours` (3..=30).
-    pub fn new(source: [Vec3; SKELETON_POINTS], target: [Vec3; SKELETON_POINTS], neighbours: usize) -> Result<Self> {
+    pub fn new(
+        source: [Vec3; SKELETON_POINTS],
+        target: [Vec3; SKELETON_POINTS],
+        neighbours: usize,
+    ) -> Result<Self> {
         if !(3..=SKELETON_POINTS).contains(&neighbours) {
             return Err(Error::Config("N_r must be in 3..=30"));
         }
-        Ok(LocalRigid { source, target, neighbours })
+        Ok(LocalRigid {
+            source,
+            target,
+            neighbours,
+        })
     }
 
     /// The `N_r` nearest source skeleton points of `p`, as a bit set.
@@ -134,7 +147,11 @@ impl LocalRigid {
     }
 
     /// The transform for `p`, from the cache when its neighbourhood was seen before.
-    pub fn transform_for<const CAP: usize>(&self, p: &Vec3, cache: &mut TransformCache<CAP>) -> Result<Rigid> {
+    pub fn transform_for<const CAP: usize>(
+        &self,
+        p: &Vec3,
+        cache: &mut TransformCache<CAP>,
+    ) -> Result<Rigid> {
         let mask = self.neighbourhood(p);
         if let Some(t) = cache.map.get(&mask) {
             cache.hits += 1;
@@ -148,16 +165,27 @@ impl LocalRigid {
         Ok(t)
     }
 
-    /// Maps one point.
-    pub fn map_point<const CAP: usize>(&self, p: &Vec3, cache: &mut TransformCache<CAP>) -> Result<Vec3> {
+    /// Maps one point. A point with a NaN, infinite or out-of-range coordinate is
+    /// refused (index 0 in the error; [`LocalRigid::map_in_place`] names the index).
+    pub fn map_point<const CAP: usize>(
+        &self,
+        p: &Vec3,
+        cache: &mut TransformCache<CAP>,
+    ) -> Result<Vec3> {
+        validate(core::slice::from_ref(p), Cloud::Query, 1, 1)?;
         Ok(self.transform_for(p, cache)?.apply(p))
     }
 
-    /// Maps points in place (any number: nothing is buffered). On error the points
-    /// before the failing one are mapped and the rest are untouched.
-    pub fn map_in_place<const CAP: usize>(&self, points: &mut [Vec3], cache: &mut TransformCache<CAP>) -> Result<()> {
+    /// Maps points in place (any number: nothing is buffered). All points are checked
+    /// first, so on bad input nothing is changed.
+    pub fn map_in_place<const CAP: usize>(
+        &self,
+        points: &mut [Vec3],
+        cache: &mut TransformCache<CAP>,
+    ) -> Result<()> {
+        validate(points, Cloud::Query, 0, usize::MAX)?;
         for p in points {
-            *p = self.map_point(p, cache)?;
+            *p = self.transform_for(p, cache)?.apply(p);
         }
         Ok(())
     }
@@ -175,10 +203,15 @@ impl LocalRigid {
 
 /// `extra` more indices of `points` nearest to `p` (ties to the lower index) added to `have`.
 fn nearest_set(points: &[Vec3; SKELETON_POINTS], p: &Vec3, extra: usize, have: u32) -> u32 {
-    let mut order: [(f32, u8); SKELETON_POINTS] = core::array::from_fn(|i| ((points[i] - p).norm_squared(), i as u8));
+    let mut order: [(f32, u8); SKELETON_POINTS] =
+        core::array::from_fn(|i| ((points[i] - p).norm_squared(), i as u8));
     order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
     let mut mask = have;
-    for &(_, i) in order.iter().filter(|(_, i)| have & (1 << i) == 0).take(extra) {
+    for &(_, i) in order
+        .iter()
+        .filter(|(_, i)| have & (1 << i) == 0)
+        .take(extra)
+    {
         mask |= 1 << i;
     }
     mask

@@ -51,7 +51,11 @@ impl<'a> KdTree<'a> {
             }
             let axis = depth % 3;
             let diff = q[axis] - p[axis];
-            let (near, far) = if diff < 0.0 { (&pts[..mid], &pts[mid + 1..]) } else { (&pts[mid + 1..], &pts[..mid]) };
+            let (near, far) = if diff < 0.0 {
+                (&pts[..mid], &pts[mid + 1..])
+            } else {
+                (&pts[mid + 1..], &pts[..mid])
+            };
             go(near, depth + 1, q, best);
             if diff * diff < *best {
                 go(far, depth + 1, q, best);
@@ -111,7 +115,10 @@ pub fn compare(registered: &mut [Vec3], target: &mut [Vec3]) -> Metrics {
     let ed = closest_distances(registered, &target_tree);
     let reg_tree = KdTree::build(registered);
     let back = closest_distances(target_tree.points(), &reg_tree);
-    Metrics { ed, hausdorff: ed.max.max(back.max) }
+    Metrics {
+        ed,
+        hausdorff: ed.max.max(back.max),
+    }
 }
 
 #[cfg(test)]
@@ -122,13 +129,18 @@ mod tests {
     #[test]
     fn kd_tree_matches_brute_force() {
         let mut rng = Rng::new(5);
-        let mut pts: heapless::Vec<Vec3, 600> =
-            (0..600).map(|_| Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 100.0).collect();
+        let mut pts: heapless::Vec<Vec3, 600> = (0..600)
+            .map(|_| Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 100.0)
+            .collect();
         let copy = pts.clone();
         let tree = KdTree::build(&mut pts);
         for _ in 0..300 {
-            let q = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 120.0 - Vec3::repeat(10.0);
-            let brute = copy.iter().map(|p| (p - q).norm_squared()).fold(f32::INFINITY, f32::min);
+            let q = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 120.0
+                - Vec3::repeat(10.0);
+            let brute = copy
+                .iter()
+                .map(|p| (p - q).norm_squared())
+                .fold(f32::INFINITY, f32::min);
             assert_eq!(tree.nearest_sq(&q), brute);
         }
     }
@@ -136,7 +148,11 @@ mod tests {
     #[test]
     fn hausdorff_of_shifted_copy() {
         let mut a = [Vec3::new(0., 0., 0.), Vec3::new(10., 0., 0.)];
-        let mut b = [Vec3::new(0., 3., 0.), Vec3::new(10., 0., 4.), Vec3::new(30., 0., 0.)];
+        let mut b = [
+            Vec3::new(0., 3., 0.),
+            Vec3::new(10., 0., 4.),
+            Vec3::new(30., 0., 0.),
+        ];
         let m = compare(&mut a, &mut b);
         assert!((m.ed.mean - 3.5).abs() < 1e-6);
         assert!((m.ed.sd - 0.5).abs() < 1e-6);

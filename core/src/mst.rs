@@ -76,7 +76,9 @@ impl<const N: usize> Tree<N> {
 
     /// Total Euclidean length of the tree over the `points` it was built on.
     pub fn weight(&self, points: &[Vec3]) -> f32 {
-        self.edges().map(|(a, b)| (points[a] - points[b]).norm()).sum()
+        self.edges()
+            .map(|(a, b)| (points[a] - points[b]).norm())
+            .sum()
     }
 
     /// Number of edges at each node.
@@ -154,7 +156,8 @@ impl<const N: usize> Tree<N> {
     /// Neighbours of `v` in the tree.
     pub fn neighbours(&self, v: usize) -> impl Iterator<Item = usize> + '_ {
         let up = (v != 0).then(|| self.parent(v));
-        up.into_iter().chain((1..self.len).filter(move |&w| self.parent(w) == v))
+        up.into_iter()
+            .chain((1..self.len).filter(move |&w| self.parent(w) == v))
     }
 }
 
@@ -164,7 +167,8 @@ mod tests {
 
     #[test]
     fn line_of_points_gives_a_chain() {
-        let pts: [Vec3; 6] = core::array::from_fn(|i| Vec3::new([0., 5., 1., 4., 2., 3.][i], 0., 0.));
+        let pts: [Vec3; 6] =
+            core::array::from_fn(|i| Vec3::new([0., 5., 1., 4., 2., 3.][i], 0., 0.));
         let t = Tree::<6>::prim(&pts).unwrap();
         assert!((t.weight(&pts) - 5.0).abs() < 1e-6);
         let deg = t.degrees();

@@ -3,8 +3,8 @@
 
 use crate::endpoints::{match_endpoints, EndpointMatch};
 use crate::error::{Cloud, Error, Result};
-use crate::geom::{validate, Rigid};
-use crate::guided::{label_nodes, rib_points, target_skeleton, NodeLabels};
+use crate::geom::{nearest, validate, Rigid};
+use crate::guided::{fit_ribs, label_nodes, target_skeleton, NodeLabels};
 use crate::local_rigid::{LocalRigid, NEIGHBOURS};
 use crate::skeleton::{RibEnds, RibSkeleton, SkeletonGraph, TURN_ANGLE_DEG};
 use crate::som::SomConfig;
@@ -48,7 +48,10 @@ impl Config {
     /// README's evaluation). Pair it with an anterior-surface template (host-side
     /// `ribreg_sim::prep::anterior_mask`).
     pub fn improved() -> Self {
-        Config { rib_model: RibModel::Guided, ..Config::default() }
+        Config {
+            rib_model: RibModel::Guided,
+            ..Config::default()
+        }
     }
 }
 
@@ -91,15 +94,39 @@ impl Template {
             RibModel::Graph => {
                 let ends = RibEnds::from_template(&graph, cloud, labels)?;
                 let skeleton = RibSkeleton::build(&graph, &ends, cfg, Cloud::Template)?;
-                Ok(Template { graph, node_labels, ends: Some(ends), skeleton })
+                Ok(Template {
+                    graph,
+                    node_labels,
+                    ends: Some(ends),
+                    skeleton,
+                })
             }
             RibModel::Guided => {
                 if labels.is_none() {
-                    return Err(Error::Config("the guided rib model needs a labelled template"));
+                    return Err(Error::Config(
+                        "the guided rib model needs a labelled template",
+                    ));
                 }
-                let points = rib_points(&graph.som1, &node_labels, &Rigid::identity(), Cloud::Template)?;
-                let skeleton = RibSkeleton { points, paths: Default::default(), degree: [3; 4] };
-                Ok(Template { graph, node_labels, ends: None, skeleton })
+                // Points take their nearest node's label, exactly as the target's will.
+                let points = fit_ribs(
+                    cloud,
+                    &graph.som1,
+                    &node_labels,
+                    &Rigid::identity(),
+                    |_, p| nearest(&graph.som1, p).map_or(0, |(j, _)| node_labels[j]),
+                    Cloud::Template,
+                )?;
+                let skeleton = RibSkeleton {
+                    points,
+                    paths: Default::default(),
+                    degree: [3; 4],
+                };
+                Ok(Template {
+                    graph,
+                    node_labels,
+                    ends: None,
+                    skeleton,
+                })
             }
         }
     }
@@ -133,16 +160,35 @@ pub fn register(template: &Template, target: &[Vec3], cfg: &Config) -> Result<Re
         }
         (RibModel::Guided, None) => {
             let (pose, points) = target_skeleton(
+                target,
                 &graph,
                 &template.graph,
                 &template.node_labels,
                 &template.skeleton.points,
                 cfg.neighbours,
             )?;
-            (pose, None, RibSkeleton { points, paths: Default::default(), degree: [3; 4] })
+            (
+                pose,
+                None,
+                RibSkeleton {
+                    points,
+                    paths: Default::default(),
+                    degree: [3; 4],
+                },
+            )
         }
-        _ => return Err(Error::Config("template and registration use different rib models")),
+        _ => {
+            return Err(Error::Config(
+                "template and registration use different rib models",
+            ))
+        }
     };
     let map = LocalRigid::new(template.skeleton.points, skeleton.points, cfg.neighbours)?;
-    Ok(Registration { graph, pose, matching, skeleton, map })
+    Ok(Registration {
+        graph,
+        pose,
+        matching,
+        skeleton,
+        map,
+    })
 }

@@ -29,7 +29,8 @@
 //! when labels are given ([`Error::RibOrder`] unless every rib gets exactly one endpoint
 //! per side); without labels, endpoints are ordered cranio-caudally on each side (the
 //! template is in the patient frame: `+y` cranial). Target: endpoints inherit the label
-//! of the template endpoint they are matched to (see [`crate::endpoints`]).
+//! of the template endpoint they are matched to (see [`crate::endpoints`]). Both clouds'
+//! endpoints come from the same rule.
 
 use crate::error::{Cloud, Error, Result};
 use crate::fit::{equal_steps, Poly};
@@ -56,9 +57,8 @@ pub const LATERAL_FRACTION: f32 = 0.35;
 /// Paper Eq. 4 threshold T_θ.
 pub const TURN_ANGLE_DEG: f32 = 60.0;
 
-const _: () = assert!(
-    RIB_SAMPLES[0] + RIB_SAMPLES[1] + RIB_SAMPLES[2] + RIB_SAMPLES[3] == SKELETON_POINTS
-);
+const _: () =
+    assert!(RIB_SAMPLES[0] + RIB_SAMPLES[1] + RIB_SAMPLES[2] + RIB_SAMPLES[3] == SKELETON_POINTS);
 const _: () = assert!(KEY_POINTS <= crate::mst::MAX_TREE_NODES);
 
 /// The SOM / MST / endpoint stage of one cloud (≈ 5.7 KiB, see the crate docs).
@@ -87,25 +87,40 @@ impl SkeletonGraph {
     /// oriented to it (used for the template); otherwise their signs are arbitrary.
     pub fn build(cloud: &[Vec3], which: Cloud, cfg: &Config, patient_frame: bool) -> Result<Self> {
         let (som1, som2) = (&cfg.som1, &cfg.som2);
-        let frame0 = Frame::principal(cloud, som1.seed)
-            .ok_or(Error::TooFewPoints { cloud: which, found: 0, min: 1 })?;
+        let frame0 = Frame::principal(cloud, som1.seed).ok_or(Error::TooFewPoints {
+            cloud: which,
+            found: 0,
+            min: 1,
+        })?;
         if frame0.spread[1].is_nan() || frame0.spread[1] < MIN_SPREAD_MM {
-            return Err(Error::Degenerate { cloud: which, spread_mm: frame0.spread[1] });
+            return Err(Error::Degenerate {
+                cloud: which,
+                spread_mm: frame0.spread[1],
+            });
         }
         let map1 = Som::<SOM1_CAPACITY>::train(cloud, &frame0, som1)?;
         let mut live1 = heapless::Vec::new();
         map1.live_nodes(cloud, som1.seed, &mut live1)?;
-        let frame1 = Frame::principal(&live1, som2.seed)
-            .ok_or(Error::Degenerate { cloud: which, spread_mm: 0.0 })?;
+        let frame1 = Frame::principal(&live1, som2.seed).ok_or(Error::Degenerate {
+            cloud: which,
+            spread_mm: 0.0,
+        })?;
         let map2 = Som::<KEY_POINTS>::train(&live1, &frame1, som2)?;
         let mut key_points = heapless::Vec::new();
         map2.live_nodes(&live1, som2.seed, &mut key_points)?;
         if key_points.len() < MIN_KEY_POINTS {
-            return Err(Error::Endpoints { cloud: which, side: 0, found: 0, expected: 4 });
+            return Err(Error::Endpoints {
+                cloud: which,
+                side: 0,
+                found: 0,
+                expected: 4,
+            });
         }
         let tree = Tree::prim(&key_points)?;
-        let mut frame = Frame::principal(&key_points, 0)
-            .ok_or(Error::Degenerate { cloud: which, spread_mm: 0.0 })?;
+        let mut frame = Frame::principal(&key_points, 0).ok_or(Error::Degenerate {
+            cloud: which,
+            spread_mm: 0.0,
+        })?;
         if patient_frame {
             frame = frame.oriented_to_patient();
         }
@@ -120,7 +135,15 @@ impl SkeletonGraph {
         gift_wrap(&uv, &mut hull)?;
         let midline = median_u(&uv);
         let endpoints = select_endpoints(&key_points, &tree, &uv, &hull, midline, which);
-        Ok(SkeletonGraph { som1: live1, key_points, tree, frame, hull, midline, endpoints })
+        Ok(SkeletonGraph {
+            som1: live1,
+            key_points,
+            tree,
+            frame,
+            hull,
+            midline,
+            endpoints,
+        })
     }
 
     /// Side of a key point: 0 below the midline, 1 above.
@@ -196,7 +219,12 @@ fn select_endpoints(
             }
         }
         if cands.len() < 4 {
-            return Err(Error::Endpoints { cloud: which, side: side as u8, found: cands.len() as u8, expected: 4 });
+            return Err(Error::Endpoints {
+                cloud: which,
+                side: side as u8,
+                found: cands.len() as u8,
+                expected: 4,
+            });
         }
         // Most cranial (+v) first.
         cands.sort_unstable_by(|a, b| uv[b.0].y.total_cmp(&uv[a.0].y));
@@ -212,15 +240,21 @@ fn select_endpoints(
 pub struct RibEnds(pub [[u8; 2]; 4]);
 
 impl RibEnds {
-    /// Template rib ends. With `labels` (rib number per cloud point; values other than
-    /// 2..=5 are ignored): each key point takes the label of the nearest labelled point,
-    /// and the end of rib `r` on a side is its most lateral key point labelled `r` there —
-    /// the labels make the endpoint rule unnecessary. Without labels: the endpoint rule's
-    /// endpoints, in cranio-caudal order on each side (+y cranial).
-    pub fn from_template(graph: &SkeletonGraph, cloud: &[Vec3], labels: Option<&[u8]>) -> Result<Self> {
+    /// Template rib ends: the endpoint rule's eight endpoints, ordered into ribs. With
+    /// `labels` (rib number per cloud point; values other than 2..=5 are ignored) each
+    /// endpoint takes the label of the nearest labelled point and every rib must get
+    /// exactly one endpoint per side ([`Error::RibOrder`] otherwise); without labels they
+    /// are ordered cranio-caudally on each side (+y cranial). The target's endpoints come
+    /// from the same rule, so both clouds' rib ends are found the same way (the paper:
+    /// hull endpoints, grouped by the template's rib order).
+    pub fn from_template(
+        graph: &SkeletonGraph,
+        cloud: &[Vec3],
+        labels: Option<&[u8]>,
+    ) -> Result<Self> {
+        let e = graph.endpoints?;
         let Some(labels) = labels else {
             // `endpoints` are already most cranial first.
-            let e = graph.endpoints?;
             return Ok(RibEnds(core::array::from_fn(|r| [e[0][r], e[1][r]])));
         };
         if labels.len() != cloud.len() {
@@ -229,30 +263,36 @@ impl RibEnds {
                 expected: crate::geom::sat_u32(cloud.len()),
             });
         }
-        // Per (rib, side): best key point so far and its distance from the midline.
-        let mut best = [[(u8::MAX, -1.0f32); 2]; 4];
-        for (k, p) in graph.key_points.iter().enumerate() {
-            let nearest_rib = cloud
-                .iter()
-                .zip(labels)
-                .filter(|(_, l)| RIBS.contains(l))
-                .min_by(|a, b| (a.0 - p).norm_squared().total_cmp(&(b.0 - p).norm_squared()))
-                .map(|(_, &l)| l);
-            let Some(rib) = nearest_rib else { continue };
-            let side = graph.side(k);
-            let lateral = (graph.frame.local(p).x - graph.midline).abs();
-            let slot = &mut best[usize::from(rib - RIBS[0])][side];
-            if lateral > slot.1 {
-                *slot = (k as u8, lateral);
-            }
-        }
         let mut ends = [[0u8; 2]; 4];
-        for (r, sides) in best.iter().enumerate() {
-            for (side, &(k, _)) in sides.iter().enumerate() {
-                if k == u8::MAX {
-                    return Err(Error::RibOrder { side: side as u8, rib: RIBS[r], found: 0 });
-                }
+        for (side, side_ends) in e.iter().enumerate() {
+            let mut count = [0u8; 4];
+            for &k in side_ends {
+                let p = graph.key_points[usize::from(k)];
+                let rib = cloud
+                    .iter()
+                    .zip(labels)
+                    .filter(|(_, l)| RIBS.contains(l))
+                    .min_by(|a, b| {
+                        (a.0 - p)
+                            .norm_squared()
+                            .total_cmp(&(b.0 - p).norm_squared())
+                    })
+                    .map(|(_, &l)| l)
+                    .ok_or(Error::RibOrder {
+                        side: side as u8,
+                        rib: RIBS[0],
+                        found: 0,
+                    })?;
+                let r = usize::from(rib - RIBS[0]);
+                count[r] += 1;
                 ends[r][side] = k;
+            }
+            if let Some(r) = count.iter().position(|&c| c != 1) {
+                return Err(Error::RibOrder {
+                    side: side as u8,
+                    rib: RIBS[r],
+                    found: count[r],
+                });
             }
         }
         Ok(RibEnds(ends))
@@ -273,7 +313,12 @@ pub struct RibSkeleton {
 
 impl RibSkeleton {
     /// Paths, turn filter, fit and resampling for the rib `ends` of `graph`.
-    pub fn build(graph: &SkeletonGraph, ends: &RibEnds, cfg: &Config, which: Cloud) -> Result<Self> {
+    pub fn build(
+        graph: &SkeletonGraph,
+        ends: &RibEnds,
+        cfg: &Config,
+        which: Cloud,
+    ) -> Result<Self> {
         let turn_angle_deg = cfg.turn_angle_deg;
         if turn_angle_deg.is_nan() || turn_angle_deg <= 0.0 || turn_angle_deg > 180.0 {
             return Err(Error::Config("turn angle must be in (0, 180] degrees"));
@@ -285,21 +330,40 @@ impl RibSkeleton {
         let mut offset = 0;
         for (r, [a, b]) in ends.0.iter().enumerate() {
             let mut raw = heapless::Vec::<u8, KEY_POINTS>::new();
-            graph.tree.path(usize::from(*a), usize::from(*b), &mut raw)?;
+            graph
+                .tree
+                .path(usize::from(*a), usize::from(*b), &mut raw)?;
             turn_filter(&graph.key_points, &raw, cos_max, &mut paths[r]);
             let kept = &paths[r];
             if kept.len() < 2 {
-                return Err(Error::RibPath { cloud: which, rib: RIBS[r], found: kept.len() as u8, min: 2 });
+                return Err(Error::RibPath {
+                    cloud: which,
+                    rib: RIBS[r],
+                    found: kept.len() as u8,
+                    min: 2,
+                });
             }
-            let local: heapless::Vec<Vec3, KEY_POINTS> =
-                kept.iter().map(|&k| graph.frame.local(&graph.key_points[usize::from(k)])).collect();
+            let local: heapless::Vec<Vec3, KEY_POINTS> = kept
+                .iter()
+                .map(|&k| graph.frame.local(&graph.key_points[usize::from(k)]))
+                .collect();
             let (x0, x1) = (local[0].x, local[local.len() - 1].x);
             let out = &mut points[offset..offset + RIB_SAMPLES[r]];
-            degree[r] = fit_rib(&local, x0, x1, |q| graph.frame.world(q), out)
-                .map_err(|_| Error::RibPath { cloud: which, rib: RIBS[r], found: kept.len() as u8, min: 2 })?;
+            degree[r] = fit_rib(&local, x0, x1, |q| graph.frame.world(q), out).map_err(|_| {
+                Error::RibPath {
+                    cloud: which,
+                    rib: RIBS[r],
+                    found: kept.len() as u8,
+                    min: 2,
+                }
+            })?;
             offset += RIB_SAMPLES[r];
         }
-        Ok(RibSkeleton { points, paths, degree })
+        Ok(RibSkeleton {
+            points,
+            paths,
+            degree,
+        })
     }
 
     /// The skeleton moved by a rigid transform (for tests and diagnostics).
@@ -316,7 +380,13 @@ impl RibSkeleton {
 /// frame whose x runs along the rib; degree 3, or `len − 1` when fewer than 4 points),
 /// resampled at `out.len()` equal x steps from `x0` to `x1` and taken back to the world
 /// by `to_world`. Returns the degree used.
-pub fn fit_rib(local: &[Vec3], x0: f32, x1: f32, to_world: impl Fn(&Vec3) -> Vec3, out: &mut [Vec3]) -> Result<u8> {
+pub fn fit_rib(
+    local: &[Vec3],
+    x0: f32,
+    x1: f32,
+    to_world: impl Fn(&Vec3) -> Vec3,
+    out: &mut [Vec3],
+) -> Result<u8> {
     const CAP: usize = crate::skeleton::SOM1_CAPACITY;
     if local.len() < 2 || local.len() > CAP {
         return Err(Error::Config("a rib fit needs 2..=400 points"));
@@ -337,7 +407,12 @@ pub fn fit_rib(local: &[Vec3], x0: f32, x1: f32, to_world: impl Fn(&Vec3) -> Vec
 /// Paper Eq. 4: keep the first two path points, then a point only if the turn from the
 /// last kept segment to it is at most T_θ. A point coinciding with the last kept one is
 /// dropped (no direction).
-pub fn turn_filter<const N: usize>(pts: &[Vec3], path: &[u8], cos_max: f32, out: &mut heapless::Vec<u8, N>) {
+pub fn turn_filter<const N: usize>(
+    pts: &[Vec3],
+    path: &[u8],
+    cos_max: f32,
+    out: &mut heapless::Vec<u8, N>,
+) {
     out.clear();
     for &k in path {
         let p = pts[usize::from(k)];
@@ -369,12 +444,17 @@ mod tests {
             Vec3::new(0., 0., 0.),
             Vec3::new(1., 0., 0.),
             Vec3::new(2., 0., 0.),
-            Vec3::new(2., 5., 0.), // 90° turn from (1,0)->(2,0): dropped
+            Vec3::new(2., 5., 0.),  // 90° turn from (1,0)->(2,0): dropped
             Vec3::new(3., 0.5, 0.), // small turn from the last kept segment: kept
             Vec3::new(3., 0.5, 0.), // coincident: dropped
         ];
         let mut out = heapless::Vec::<u8, 8>::new();
-        turn_filter(&pts, &[0, 1, 2, 3, 4, 5], libm::cosf(60f32.to_radians()), &mut out);
+        turn_filter(
+            &pts,
+            &[0, 1, 2, 3, 4, 5],
+            libm::cosf(60f32.to_radians()),
+            &mut out,
+        );
         assert_eq!(out.as_slice(), &[0, 1, 2, 4]);
     }
 }

@@ -8,8 +8,9 @@
 //!    `θ = exp(−d² / (2σ(i)²))`, `d` the grid distance to the BMU.
 //!
 //! Radius and learning rate decay geometrically from their start to their end value:
-//! `σ(i) = σ₀ (σ₁/σ₀)^(i/(T−1))`, likewise `lr(i)`. Nodes with `d > 3σ(i)` are not
-//! touched (`θ < 0.012` there), so late iterations cost little more than the BMU search.
+//! `σ(i) = σ₀ (σ₁/σ₀)^(i/(T−1))`, likewise `lr(i)`. Only nodes within `±⌈3σ(i)⌉` rows
+//! and columns of the BMU are updated (beyond `3σ`, `θ < 0.012`), so late iterations cost
+//! little more than the BMU search.
 //! The Gaussian is separable, `θ = g(dr) g(dc)`, so one iteration evaluates `R + C`
 //! exponentials instead of `R · C`.
 //!
@@ -80,7 +81,9 @@ impl SomConfig {
             && self.cols <= MAX_GRID_SIDE
             && self.rows * self.cols <= capacity;
         if !grid {
-            return Err(Error::Config("SOM grid must be 1..=64 per side and fit the map's capacity"));
+            return Err(Error::Config(
+                "SOM grid must be 1..=64 per side and fit the map's capacity",
+            ));
         }
         let ok = self.iterations >= 1
             && self.lr_start > 0.0
@@ -94,7 +97,9 @@ impl SomConfig {
         if ok {
             Ok(())
         } else {
-            Err(Error::Config("SOM needs iterations >= 1, learning rates in (0, 1], radii > 0"))
+            Err(Error::Config(
+                "SOM needs iterations >= 1, learning rates in (0, 1], radii > 0",
+            ))
         }
     }
 }
@@ -142,7 +147,13 @@ impl<const CAP: usize> Som<CAP> {
                 let d = c.abs_diff(bc) as f32;
                 *g = lr * libm::expf(inv * d * d);
             }
-            for (row, gr) in som.nodes.chunks_exact_mut(cols).skip(r0).take(r1 + 1 - r0).zip(&g_row[r0..=r1]) {
+            for (row, gr) in som
+                .nodes
+                .chunks_exact_mut(cols)
+                .skip(r0)
+                .take(r1 + 1 - r0)
+                .zip(&g_row[r0..=r1])
+            {
                 for (w, gc) in row[c0..=c1].iter_mut().zip(&g_col[c0..=c1]) {
                     *w += (p - *w) * (gr * gc);
                 }
@@ -167,7 +178,9 @@ impl<const CAP: usize> Som<CAP> {
             for c in 0..cols {
                 nodes
                     .push(frame.origin + e1 * span(c, cols) + e2 * span(r, rows))
-                    .map_err(|_| Error::Capacity { capacity: CAP as u32 })?;
+                    .map_err(|_| Error::Capacity {
+                        capacity: CAP as u32,
+                    })?;
             }
         }
         Ok(Som { rows, cols, nodes })
@@ -191,19 +204,29 @@ impl<const CAP: usize> Som<CAP> {
     /// them when at most [`LIVE_SAMPLES`], else a seeded sample of that size), row after
     /// row, into `out`. Nodes that win no point are the "dead units" a grid leaves in the
     /// gaps between separate structures (between two ribs): they lie on no surface.
-    pub fn live_nodes<const M: usize>(&self, points: &[Vec3], seed: u64, out: &mut heapless::Vec<Vec3, M>) -> Result<()> {
+    pub fn live_nodes<const M: usize>(
+        &self,
+        points: &[Vec3],
+        seed: u64,
+        out: &mut heapless::Vec<Vec3, M>,
+    ) -> Result<()> {
         out.clear();
         let mut hit = [false; CAP];
         let n = points.len();
         let mut rng = Rng::new(seed);
         for k in 0..n.min(LIVE_SAMPLES) {
-            let p = if n <= LIVE_SAMPLES { points[k] } else { points[rng.below(crate::geom::sat_u32(n)) as usize] };
+            let p = if n <= LIVE_SAMPLES {
+                points[k]
+            } else {
+                points[rng.below(crate::geom::sat_u32(n)) as usize]
+            };
             let (r, c) = self.bmu(&p);
             hit[r * self.cols + c] = true;
         }
         for (w, &h) in self.nodes.iter().zip(&hit) {
             if h {
-                out.push(*w).map_err(|_| Error::Capacity { capacity: M as u32 })?;
+                out.push(*w)
+                    .map_err(|_| Error::Capacity { capacity: M as u32 })?;
             }
         }
         Ok(())
@@ -221,14 +244,25 @@ mod tests {
 
     /// A filled 200 × 80 mm sheet sampled every 4 mm.
     fn sheet() -> heapless::Vec<Vec3, 1071> {
-        (0..51 * 21).map(|i| Vec3::new(4.0 * (i % 51) as f32 - 100.0, 4.0 * (i / 51) as f32 - 40.0, 5.0)).collect()
+        (0..51 * 21)
+            .map(|i| {
+                Vec3::new(
+                    4.0 * (i % 51) as f32 - 100.0,
+                    4.0 * (i / 51) as f32 - 40.0,
+                    5.0,
+                )
+            })
+            .collect()
     }
 
     #[test]
     fn same_seed_same_map_and_nodes_land_on_the_data() {
         let pts = sheet();
         let frame = Frame::principal(&pts, 1).unwrap();
-        let cfg = SomConfig { iterations: 4000, ..SomConfig::SOM2 };
+        let cfg = SomConfig {
+            iterations: 4000,
+            ..SomConfig::SOM2
+        };
         let a = Som::<40>::train(&pts, &frame, &cfg).unwrap();
         let b = Som::<40>::train(&pts, &frame, &cfg).unwrap();
         assert_eq!(a, b);
@@ -250,10 +284,25 @@ mod tests {
     fn rejects_bad_schedules() {
         let pts = sheet();
         let frame = Frame::principal(&pts, 1).unwrap();
-        let bad = SomConfig { iterations: 0, ..SomConfig::SOM2 };
-        assert!(matches!(Som::<40>::train(&pts, &frame, &bad), Err(Error::Config(_))));
-        let bad = SomConfig { lr_start: f32::NAN, ..SomConfig::SOM2 };
-        assert!(matches!(Som::<40>::train(&pts, &frame, &bad), Err(Error::Config(_))));
-        assert!(matches!(Som::<40>::train(&[], &frame, &SomConfig::SOM2), Err(Error::Config(_))));
+        let bad = SomConfig {
+            iterations: 0,
+            ..SomConfig::SOM2
+        };
+        assert!(matches!(
+            Som::<40>::train(&pts, &frame, &bad),
+            Err(Error::Config(_))
+        ));
+        let bad = SomConfig {
+            lr_start: f32::NAN,
+            ..SomConfig::SOM2
+        };
+        assert!(matches!(
+            Som::<40>::train(&pts, &frame, &bad),
+            Err(Error::Config(_))
+        ));
+        assert!(matches!(
+            Som::<40>::train(&[], &frame, &SomConfig::SOM2),
+            Err(Error::Config(_))
+        ));
     }
 }

@@ -14,7 +14,11 @@ use std::hint::black_box;
 
 /// Template ≈ 5,000 points, target ≈ 3,000 points.
 fn pair() -> (Vec<Vec3>, Vec<u8>, Vec<Vec3>, Vec<Vec3>) {
-    let pair = PhantomPair::generate(&PhantomConfig { spacing_mm: 1.95, us_spacing_mm: 1.72, ..PhantomConfig::default() });
+    let pair = PhantomPair::generate(&PhantomConfig {
+        spacing_mm: 1.95,
+        us_spacing_mm: 1.72,
+        ..PhantomConfig::default()
+    });
     let template = to_core(&pair.template.points, Which::Template).unwrap();
     let labels = pair.template.labels.iter().map(|&l| l as u8).collect();
     let target = to_core(&pair.target, Which::Target).unwrap();
@@ -24,7 +28,11 @@ fn pair() -> (Vec<Vec3>, Vec<u8>, Vec<Vec3>, Vec<Vec3>) {
 
 fn benches(c: &mut Criterion) {
     let (template, labels, target, _) = pair();
-    eprintln!("template {} points, target {} points", template.len(), target.len());
+    eprintln!(
+        "template {} points, target {} points",
+        template.len(),
+        target.len()
+    );
     let cfg = Config::default();
     c.bench_function("skeleton_graph_target_3k", |b| {
         b.iter(|| SkeletonGraph::build(black_box(&target), Which::Target, &cfg, false).unwrap())
@@ -35,7 +43,9 @@ fn benches(c: &mut Criterion) {
         b.iter(|| {
             let mut pts = template.clone();
             let mut cache = Box::new(TransformCache::<HOST_CACHE>::new());
-            reg.map.map_in_place(black_box(&mut pts), &mut cache).unwrap();
+            reg.map
+                .map_in_place(black_box(&mut pts), &mut cache)
+                .unwrap();
             pts
         })
     });
@@ -44,7 +54,15 @@ fn benches(c: &mut Criterion) {
             b.iter(|| {
                 // Everything `ribreg register` does between reading and writing files:
                 // template preparation, registration, mapping all points, ED/HD.
-                register_clouds(black_box(&template), Some(&labels), &target, None, method, &mut |_| ()).unwrap()
+                register_clouds(
+                    black_box(&template),
+                    Some(&labels),
+                    &target,
+                    None,
+                    method,
+                    &mut |_| (),
+                )
+                .unwrap()
             })
         });
     }

@@ -2,8 +2,8 @@
 //! job: build the default phantom pair, register it, compare with the ground truth).
 
 use crate::io::{self, Cloud, Mesh, PlyFormat};
-use crate::plot::{self, SkeletonPanels};
 use crate::phantom::{PhantomConfig, PhantomPair};
+use crate::plot::{self, SkeletonPanels};
 use crate::register::{register_clouds, to_core, to_file, CliError, Method};
 use ribreg_core::error::Cloud as Which;
 use ribreg_core::geom::Rigid;
@@ -17,13 +17,34 @@ use std::time::Instant;
 /// `template_mesh.ply`, `target.ply`, `waypoints.csv` (planned, template frame),
 /// `true_waypoints.csv` (ground truth, target frame) and `params.json`.
 pub fn write_phantom(pair: &PhantomPair, dir: &Path) -> Result<(), CliError> {
-    std::fs::create_dir_all(dir)
-        .map_err(|e| CliError::Usage(format!("{}: cannot create the directory: {e}", dir.display())))?;
-    let template = Cloud { points: pair.template.points.clone(), labels: Some(pair.template.labels.clone()) };
-    io::write_ply(&dir.join("template.ply"), &template, PlyFormat::BinaryLittleEndian)?;
-    let mesh = Mesh { vertices: pair.template_mesh.0.clone(), triangles: pair.template_mesh.1.clone() };
+    std::fs::create_dir_all(dir).map_err(|e| {
+        CliError::Usage(format!(
+            "{}: cannot create the directory: {e}",
+            dir.display()
+        ))
+    })?;
+    let template = Cloud {
+        points: pair.template.points.clone(),
+        labels: Some(pair.template.labels.clone()),
+    };
+    io::write_ply(
+        &dir.join("template.ply"),
+        &template,
+        PlyFormat::BinaryLittleEndian,
+    )?;
+    let mesh = Mesh {
+        vertices: pair.template_mesh.0.clone(),
+        triangles: pair.template_mesh.1.clone(),
+    };
     io::write_mesh_ply(&dir.join("template_mesh.ply"), &mesh)?;
-    io::write_ply(&dir.join("target.ply"), &Cloud { points: pair.target.clone(), labels: None }, PlyFormat::BinaryLittleEndian)?;
+    io::write_ply(
+        &dir.join("target.ply"),
+        &Cloud {
+            points: pair.target.clone(),
+            labels: None,
+        },
+        PlyFormat::BinaryLittleEndian,
+    )?;
     io::write_points_csv(&dir.join("waypoints.csv"), &pair.template_waypoints)?;
     io::write_points_csv(&dir.join("true_waypoints.csv"), &pair.true_waypoints)?;
     let params = serde_json::to_string_pretty(&pair.write_params_json())
@@ -38,7 +59,11 @@ pub fn paired_errors(a: &[Vec3], truth: &[[f64; 3]]) -> (f64, f64, f64) {
         .iter()
         .zip(truth)
         .map(|(p, t)| {
-            let v = [f64::from(p.x) - t[0], f64::from(p.y) - t[1], f64::from(p.z) - t[2]];
+            let v = [
+                f64::from(p.x) - t[0],
+                f64::from(p.y) - t[1],
+                f64::from(p.z) - t[2],
+            ];
             (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
         })
         .collect();
@@ -70,13 +95,26 @@ pub fn run_demo(
     let template = to_core(&pair.template.points, Which::Template)?;
     let target = to_core(&pair.target, Which::Target)?;
     let waypoints = to_core(&pair.template_waypoints, Which::Query)?;
-    let labels: Vec<u8> = pair.template.labels.iter().map(|&l| u8::try_from(l).unwrap_or(0)).collect();
+    let labels: Vec<u8> = pair
+        .template
+        .labels
+        .iter()
+        .map(|&l| u8::try_from(l).unwrap_or(0))
+        .collect();
     let t1 = Instant::now();
-    let mut outcome = register_clouds(&template, Some(&labels), &target, Some(&waypoints), method, progress)?;
+    let mut outcome = register_clouds(
+        &template,
+        Some(&labels),
+        &target,
+        Some(&waypoints),
+        method,
+        progress,
+    )?;
     let total_ms = t1.elapsed().as_secs_f64() * 1e3;
     let mapped = outcome.waypoints.clone().unwrap_or_default();
     let (wp_mean, wp_sd, wp_max) = paired_errors(&mapped, &pair.true_waypoints);
-    let (dense_mean, dense_sd, dense_max) = paired_errors(&outcome.registered, &pair.true_positions());
+    let (dense_mean, dense_sd, dense_max) =
+        paired_errors(&outcome.registered, &pair.true_positions());
     outcome.report["ground_truth"] = json!({
         "waypoint_error_mm": { "mean": wp_mean, "sd": wp_sd, "max": wp_max },
         "dense_error_mm": { "mean": dense_mean, "sd": dense_sd, "max": dense_max },
@@ -86,26 +124,41 @@ pub fn run_demo(
     let labels_i32 = Some(pair.template.labels.clone());
     io::write_ply(
         &out.join("registered.ply"),
-        &Cloud { points: to_file(&outcome.registered), labels: labels_i32 },
+        &Cloud {
+            points: to_file(&outcome.registered),
+            labels: labels_i32,
+        },
         PlyFormat::BinaryLittleEndian,
     )?;
     io::write_points_csv(&out.join("mapped_waypoints.csv"), &to_file(&mapped))?;
-    let text = serde_json::to_string_pretty(&outcome.report).map_err(|e| CliError::Usage(format!("report: {e}")))?;
+    let text = serde_json::to_string_pretty(&outcome.report)
+        .map_err(|e| CliError::Usage(format!("report: {e}")))?;
     io::write_text(&out.join("report.json"), &text)?;
     write_figures(out, &template, &target, &outcome, &pair.true_waypoints)?;
-    progress(&format!("wrote {} (registered.ply, mapped_waypoints.csv, report.json, figures)", out.display()));
+    progress(&format!(
+        "wrote {} (registered.ply, mapped_waypoints.csv, report.json, figures)",
+        out.display()
+    ));
     Ok(outcome.report)
 }
 
 /// Coronal (x, y) projection of points in the template's patient frame.
 fn coronal(points: &[Vec3]) -> Vec<[f64; 2]> {
-    points.iter().map(|p| [f64::from(p.x), f64::from(p.y)]).collect()
+    points
+        .iter()
+        .map(|p| [f64::from(p.x), f64::from(p.y)])
+        .collect()
 }
 
 /// The paper's Fig. 4 for one cloud: SOM 1, SOM 2, MST with endpoints, rib paths and
 /// the 30 skeleton points, projected on the template's coronal plane (`to_patient` takes
 /// the cloud's frame there).
-fn skeleton_panels(cloud: &[Vec3], graph: &SkeletonGraph, skeleton: &RibSkeleton, to_patient: &Rigid) -> SkeletonPanels {
+fn skeleton_panels(
+    cloud: &[Vec3],
+    graph: &SkeletonGraph,
+    skeleton: &RibSkeleton,
+    to_patient: &Rigid,
+) -> SkeletonPanels {
     let moved = |pts: &[Vec3]| -> Vec<Vec3> { pts.iter().map(|p| to_patient.apply(p)).collect() };
     let key = moved(&graph.key_points);
     let mut offset = 0;
@@ -127,7 +180,10 @@ fn skeleton_panels(cloud: &[Vec3], graph: &SkeletonGraph, skeleton: &RibSkeleton
         som1: coronal(&moved(&graph.som1)),
         key_points: coronal(&key),
         edges: graph.tree.edges().collect(),
-        endpoints: graph.endpoints.map(|e| e.iter().flatten().map(|&k| usize::from(k)).collect()).unwrap_or_default(),
+        endpoints: graph
+            .endpoints
+            .map(|e| e.iter().flatten().map(|&k| usize::from(k)).collect())
+            .unwrap_or_default(),
         rib_paths,
         skeleton: coronal(&moved(&skeleton.points)),
     }
@@ -145,23 +201,38 @@ fn write_figures(
     let tpl = &outcome.template;
     let reg = &outcome.registration;
     let panels = skeleton_panels(template, &tpl.graph, &tpl.skeleton, &Rigid::identity());
-    plot::skeleton_figure(&out.join("skeleton_template"), "CT template skeleton (patient frame)", &panels).map_err(fig)?;
+    plot::skeleton_figure(
+        &out.join("skeleton_template"),
+        "CT template skeleton (patient frame)",
+        &panels,
+    )
+    .map_err(fig)?;
     let panels = skeleton_panels(target, &reg.graph, &reg.skeleton, &reg.pose);
-    plot::skeleton_figure(&out.join("skeleton_target"), "US target skeleton (rigidly aligned to the template)", &panels)
-        .map_err(fig)?;
+    plot::skeleton_figure(
+        &out.join("skeleton_target"),
+        "US target skeleton (rigidly aligned to the template)",
+        &panels,
+    )
+    .map_err(fig)?;
     // Waypoint transfer in the target frame, seen from the template's coronal plane.
     let view = |p: &Vec3| {
         let q = reg.pose.apply(p);
         [f64::from(q.x), f64::from(q.y)]
     };
-    let truth_v: Vec<Vec3> = truth.iter().map(|t| Vec3::new(t[0] as f32, t[1] as f32, t[2] as f32)).collect();
+    let truth_v: Vec<Vec3> = truth
+        .iter()
+        .map(|t| Vec3::new(t[0] as f32, t[1] as f32, t[2] as f32))
+        .collect();
     let mapped = outcome.waypoints.clone().unwrap_or_default();
     plot::waypoint_transfer(
         &out.join("waypoints"),
         "Planned waypoints mapped onto the patient",
         &target.iter().map(view).collect::<Vec<_>>(),
         &truth_v.iter().map(view).collect::<Vec<_>>(),
-        &[plot::WaypointSet { label: "ribreg".into(), points: mapped.iter().map(view).collect() }],
+        &[plot::WaypointSet {
+            label: "ribreg".into(),
+            points: mapped.iter().map(view).collect(),
+        }],
     )
     .map_err(fig)
 }

@@ -1,9 +1,9 @@
 #![doc = include_str!("../../README.md")]
 #![warn(missing_docs)]
 
+pub mod demo;
 pub mod io;
 pub mod phantom;
+pub mod plot;
 pub mod prep;
 pub mod register;
-pub mod demo;
-pub mod plot;

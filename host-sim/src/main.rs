@@ -8,7 +8,11 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 #[derive(Parser)]
-#[command(name = "ribreg", version, about = "Skeleton-graph US-CT rib-cartilage registration")]
+#[command(
+    name = "ribreg",
+    version,
+    about = "Skeleton-graph US-CT rib-cartilage registration"
+)]
 struct Cli {
     /// No progress lines on stderr.
     #[arg(long, short, global = true)]
@@ -104,7 +108,11 @@ impl PhantomArgs {
             VariantArg::Aligned => Variant::Aligned,
             VariantArg::Misaligned => Variant::Misaligned,
         };
-        PhantomConfig { seed: self.seed, variant, ..PhantomConfig::default() }
+        PhantomConfig {
+            seed: self.seed,
+            variant,
+            ..PhantomConfig::default()
+        }
     }
 }
 
@@ -117,8 +125,26 @@ fn main() -> ExitCode {
         }
     };
     let result = match cli.command {
-        Command::Register { template, target, waypoints, out, out_waypoints, report, ascii, method } => {
-            let job = RegisterJob { template, target, waypoints, out, out_waypoints, report, ascii, method: method.into() };
+        Command::Register {
+            template,
+            target,
+            waypoints,
+            out,
+            out_waypoints,
+            report,
+            ascii,
+            method,
+        } => {
+            let job = RegisterJob {
+                template,
+                target,
+                waypoints,
+                out,
+                out_waypoints,
+                report,
+                ascii,
+                method: method.into(),
+            };
             register::run(&job, &mut progress).map(|o| {
                 println!(
                     "registered {} points: ED {:.2} ± {:.2} mm (max {:.2}), HD {:.2} mm",
@@ -141,7 +167,11 @@ fn main() -> ExitCode {
                 );
             })
         }
-        Command::Demo { out_dir, phantom, method } => demo::run_demo(&phantom.config(), method.into(), &out_dir, &mut progress).map(|r| {
+        Command::Demo {
+            out_dir,
+            phantom,
+            method,
+        } => demo::run_demo(&phantom.config(), method.into(), &out_dir, &mut progress).map(|r| {
             let g = &r["ground_truth"];
             println!(
                 "demo: waypoint error {:.2} ± {:.2} mm (max {:.2}), dense error {:.2} mm, \

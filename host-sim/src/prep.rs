@@ -20,7 +20,12 @@ pub const VISIBILITY_DEPTH_MM: f32 = 3.5;
 /// [`VISIBILITY_DEPTH_MM`] of the highest point in its 3 × 3 neighbourhood of
 /// [`VISIBILITY_CELL_MM`] cells (a z-buffer seen from +z)?
 pub fn anterior_mask(points: &[Vec3]) -> Vec<bool> {
-    let cell = |p: &Vec3| ((p.x / VISIBILITY_CELL_MM).floor() as i64, (p.y / VISIBILITY_CELL_MM).floor() as i64);
+    let cell = |p: &Vec3| {
+        (
+            (p.x / VISIBILITY_CELL_MM).floor() as i64,
+            (p.y / VISIBILITY_CELL_MM).floor() as i64,
+        )
+    };
     let mut top: HashMap<(i64, i64), f32> = HashMap::new();
     for p in points {
         let e = top.entry(cell(p)).or_insert(f32::NEG_INFINITY);

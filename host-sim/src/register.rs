@@ -117,9 +117,15 @@ pub fn to_core(points: &[[f64; 3]], which: Which) -> Result<Vec<Vec3>, Error> {
         .map(|(i, p)| {
             let index = u32::try_from(i).unwrap_or(u32::MAX);
             if p.iter().any(|c| !c.is_finite()) {
-                Err(Error::NonFinite { cloud: which, index })
+                Err(Error::NonFinite {
+                    cloud: which,
+                    index,
+                })
             } else if p.iter().any(|c| c.abs() > f64::from(MAX_COORD_MM)) {
-                Err(Error::OutOfRange { cloud: which, index })
+                Err(Error::OutOfRange {
+                    cloud: which,
+                    index,
+                })
             } else {
                 Ok(Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32))
             }
@@ -129,12 +135,17 @@ pub fn to_core(points: &[[f64; 3]], which: Which) -> Result<Vec<Vec3>, Error> {
 
 /// Core points → f64 file points.
 pub fn to_file(points: &[Vec3]) -> Vec<[f64; 3]> {
-    points.iter().map(|p| [f64::from(p.x), f64::from(p.y), f64::from(p.z)]).collect()
+    points
+        .iter()
+        .map(|p| [f64::from(p.x), f64::from(p.y), f64::from(p.z)])
+        .collect()
 }
 
 /// PLY labels → core labels: 0 (unlabelled), 1 (sternum) or a rib 2..=5.
 pub fn to_core_labels(path: &Path, labels: &Option<Vec<i32>>) -> Result<Option<Vec<u8>>, CliError> {
-    let Some(labels) = labels else { return Ok(None) };
+    let Some(labels) = labels else {
+        return Ok(None);
+    };
     labels
         .iter()
         .enumerate()
@@ -183,10 +194,24 @@ pub fn register_clouds(
         Method::Paper => Template::build(template, labels, cfg)?,
         Method::Improved => {
             let mask = prep::anterior_mask(template);
-            let front: Vec<Vec3> = template.iter().zip(&mask).filter(|(_, m)| **m).map(|(p, _)| *p).collect();
-            let front_labels: Option<Vec<u8>> =
-                labels.map(|l| l.iter().zip(&mask).filter(|(_, m)| **m).map(|(l, _)| *l).collect());
-            progress(&format!("template: {} of {} points face the probe", front.len(), template.len()));
+            let front: Vec<Vec3> = template
+                .iter()
+                .zip(&mask)
+                .filter(|(_, m)| **m)
+                .map(|(p, _)| *p)
+                .collect();
+            let front_labels: Option<Vec<u8>> = labels.map(|l| {
+                l.iter()
+                    .zip(&mask)
+                    .filter(|(_, m)| **m)
+                    .map(|(l, _)| *l)
+                    .collect()
+            });
+            progress(&format!(
+                "template: {} of {} points face the probe",
+                front.len(),
+                template.len()
+            ));
             Template::build(&front, front_labels.as_deref(), cfg)?
         }
     };
@@ -318,24 +343,40 @@ fn ms(d: std::time::Duration) -> f64 {
 /// Runs `ribreg register`. Nothing is written unless everything succeeded; outputs
 /// written before a failing one are removed again.
 pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<RegisterOutcome, CliError> {
-    let outputs: Vec<&PathBuf> =
-        [Some(&job.out), job.out_waypoints.as_ref(), job.report.as_ref()].into_iter().flatten().collect();
+    let outputs: Vec<&PathBuf> = [
+        Some(&job.out),
+        job.out_waypoints.as_ref(),
+        job.report.as_ref(),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
     if job.out_waypoints.is_some() && job.waypoints.is_none() {
         return Err(CliError::Usage("--out-waypoints needs --waypoints".into()));
     }
     for (i, a) in outputs.iter().enumerate() {
         if outputs[..i].contains(a) || [&job.template, &job.target].contains(a) {
-            return Err(CliError::Usage(format!("{}: used twice (inputs and outputs must differ)", a.display())));
+            return Err(CliError::Usage(format!(
+                "{}: used twice (inputs and outputs must differ)",
+                a.display()
+            )));
         }
     }
     let t0 = Instant::now();
     let template: Cloud = io::read_ply(&job.template)?;
     let target: Cloud = io::read_ply(&job.target)?;
-    let waypoints = job.waypoints.as_deref().map(io::read_points_csv).transpose()?;
+    let waypoints = job
+        .waypoints
+        .as_deref()
+        .map(io::read_points_csv)
+        .transpose()?;
     let labels = to_core_labels(&job.template, &template.labels)?;
     let tpl = to_core(&template.points, Which::Template)?;
     let tgt = to_core(&target.points, Which::Target)?;
-    let wps = waypoints.as_deref().map(|w| to_core(w, Which::Query)).transpose()?;
+    let wps = waypoints
+        .as_deref()
+        .map(|w| to_core(w, Which::Query))
+        .transpose()?;
     if let Some(w) = &waypoints {
         if w.is_empty() {
             return Err(CliError::Usage(format!(
@@ -345,7 +386,12 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
         }
     }
     let t_read = t0.elapsed();
-    progress(&format!("read {} template and {} target points ({:.1} ms)", tpl.len(), tgt.len(), ms(t_read)));
+    progress(&format!(
+        "read {} template and {} target points ({:.1} ms)",
+        tpl.len(),
+        tgt.len(),
+        ms(t_read)
+    ));
     if job.method == Method::Improved && labels.is_none() {
         return Err(CliError::Usage(format!(
             "{}: the improved method needs a labelled template (PLY vertex property `label`); \
@@ -353,12 +399,26 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
             job.template.display()
         )));
     }
-    let mut outcome = register_clouds(&tpl, labels.as_deref(), &tgt, wps.as_deref(), job.method, progress)?;
+    let mut outcome = register_clouds(
+        &tpl,
+        labels.as_deref(),
+        &tgt,
+        wps.as_deref(),
+        job.method,
+        progress,
+    )?;
     let t1 = Instant::now();
     let mut written: Vec<&Path> = Vec::new();
     let result = (|| -> Result<(), CliError> {
-        let out = Cloud { points: to_file(&outcome.registered), labels: template.labels.clone() };
-        let format = if job.ascii { PlyFormat::Ascii } else { PlyFormat::BinaryLittleEndian };
+        let out = Cloud {
+            points: to_file(&outcome.registered),
+            labels: template.labels.clone(),
+        };
+        let format = if job.ascii {
+            PlyFormat::Ascii
+        } else {
+            PlyFormat::BinaryLittleEndian
+        };
         io::write_ply(&job.out, &out, format)?;
         written.push(&job.out);
         if let (Some(path), Some(w)) = (&job.out_waypoints, &outcome.waypoints) {

@@ -7,7 +7,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 fn ribreg(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ribreg")).args(args).output().expect("the binary runs")
+    Command::new(env!("CARGO_BIN_EXE_ribreg"))
+        .args(args)
+        .output()
+        .expect("the binary runs")
 }
 
 fn s(p: &Path) -> &str {
@@ -16,13 +19,27 @@ fn s(p: &Path) -> &str {
 
 /// A phantom pair written as template.ply (labelled), target.ply and waypoints.csv.
 fn inputs(dir: &Path) -> (PathBuf, PathBuf, PathBuf, PhantomPair) {
-    let pair = PhantomPair::generate(&PhantomConfig { seed: 3, ..PhantomConfig::default() });
+    let pair = PhantomPair::generate(&PhantomConfig {
+        seed: 3,
+        ..PhantomConfig::default()
+    });
     let t = dir.join("template.ply");
     let u = dir.join("target.ply");
     let w = dir.join("waypoints.csv");
-    let tc = Cloud { points: pair.template.points.clone(), labels: Some(pair.template.labels.clone()) };
+    let tc = Cloud {
+        points: pair.template.points.clone(),
+        labels: Some(pair.template.labels.clone()),
+    };
     io::write_ply(&t, &tc, PlyFormat::Ascii).unwrap();
-    io::write_ply(&u, &Cloud { points: pair.target.clone(), labels: None }, PlyFormat::BinaryLittleEndian).unwrap();
+    io::write_ply(
+        &u,
+        &Cloud {
+            points: pair.target.clone(),
+            labels: None,
+        },
+        PlyFormat::BinaryLittleEndian,
+    )
+    .unwrap();
     io::write_points_csv(&w, &pair.template_waypoints).unwrap();
     (t, u, w, pair)
 }
@@ -31,10 +48,17 @@ fn inputs(dir: &Path) -> (PathBuf, PathBuf, PathBuf, PhantomPair) {
 /// "ribreg: error:" and containing `needle`, and none of `outputs` exists.
 fn assert_refused(out: &Output, needle: &str, outputs: &[&Path]) {
     let err = String::from_utf8_lossy(&out.stderr);
-    let lines: Vec<&str> = err.lines().filter(|l| l.starts_with("ribreg: error:")).collect();
+    let lines: Vec<&str> = err
+        .lines()
+        .filter(|l| l.starts_with("ribreg: error:"))
+        .collect();
     assert_eq!(out.status.code(), Some(2), "stderr: {err}");
     assert_eq!(lines.len(), 1, "stderr: {err}");
-    assert!(lines[0].contains(needle), "expected {needle:?} in {:?}", lines[0]);
+    assert!(
+        lines[0].contains(needle),
+        "expected {needle:?} in {:?}",
+        lines[0]
+    );
     for p in outputs {
         assert!(!p.exists(), "{} was left behind", p.display());
     }
@@ -44,10 +68,26 @@ fn assert_refused(out: &Output, needle: &str, outputs: &[&Path]) {
 fn register_writes_every_output_in_template_order() {
     let dir = tempfile::tempdir().unwrap();
     let (t, u, w, pair) = inputs(dir.path());
-    let (out, ow, rep) = (dir.path().join("m.ply"), dir.path().join("m.csv"), dir.path().join("r.json"));
+    let (out, ow, rep) = (
+        dir.path().join("m.ply"),
+        dir.path().join("m.csv"),
+        dir.path().join("r.json"),
+    );
     let o = ribreg(&[
-        "register", "--template", s(&t), "--target", s(&u), "--waypoints", s(&w),
-        "--out", s(&out), "--out-waypoints", s(&ow), "--report", s(&rep), "--quiet",
+        "register",
+        "--template",
+        s(&t),
+        "--target",
+        s(&u),
+        "--waypoints",
+        s(&w),
+        "--out",
+        s(&out),
+        "--out-waypoints",
+        s(&ow),
+        "--report",
+        s(&rep),
+        "--quiet",
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let reg = io::read_ply(&out).unwrap();
@@ -59,15 +99,24 @@ fn register_writes_every_output_in_template_order() {
         .points
         .iter()
         .zip(&truth)
-        .map(|(p, q)| ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt())
+        .map(|(p, q)| {
+            ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
+        })
         .sum::<f64>()
         / truth.len() as f64;
     assert!(mean < 6.0, "dense error {mean} mm");
     let wps = io::read_points_csv(&ow).unwrap();
     assert_eq!(wps.len(), 10);
-    let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
-    assert_eq!(report["skeleton"]["template"].as_array().map(Vec::len), Some(30));
-    assert_eq!(report["skeleton"]["target"].as_array().map(Vec::len), Some(30));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+    assert_eq!(
+        report["skeleton"]["template"].as_array().map(Vec::len),
+        Some(30)
+    );
+    assert_eq!(
+        report["skeleton"]["target"].as_array().map(Vec::len),
+        Some(30)
+    );
     assert!(report["metrics"]["hausdorff_mm"].as_f64().unwrap() > 0.0);
     assert!(report["timings_ms"]["register"].as_f64().is_some());
 }
@@ -77,7 +126,15 @@ fn missing_file() {
     let dir = tempfile::tempdir().unwrap();
     let (_, u, _, _) = inputs(dir.path());
     let out = dir.path().join("m.ply");
-    let o = ribreg(&["register", "--template", "/nonexistent/ct.ply", "--target", s(&u), "--out", s(&out)]);
+    let o = ribreg(&[
+        "register",
+        "--template",
+        "/nonexistent/ct.ply",
+        "--target",
+        s(&u),
+        "--out",
+        s(&out),
+    ]);
     assert_refused(&o, "/nonexistent/ct.ply", &[&out]);
 }
 
@@ -87,16 +144,47 @@ fn malformed_and_truncated_ply() {
     let (t, u, _, _) = inputs(dir.path());
     let out = dir.path().join("m.ply");
     let bad = dir.path().join("bad.ply");
-    std::fs::write(&bad, b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n2\n3\n").unwrap();
-    assert_refused(&ribreg(&["register", "--template", s(&t), "--target", s(&bad), "--out", s(&out)]), "bad.ply", &[&out]);
+    std::fs::write(
+        &bad,
+        b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n2\n3\n",
+    )
+    .unwrap();
+    assert_refused(
+        &ribreg(&[
+            "register",
+            "--template",
+            s(&t),
+            "--target",
+            s(&bad),
+            "--out",
+            s(&out),
+        ]),
+        "bad.ply",
+        &[&out],
+    );
     let bytes = std::fs::read(&u).unwrap();
     let cut = dir.path().join("cut.ply");
     std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
-    assert_refused(&ribreg(&["register", "--template", s(&t), "--target", s(&cut), "--out", s(&out)]), "cut.ply", &[&out]);
+    assert_refused(
+        &ribreg(&[
+            "register",
+            "--template",
+            s(&t),
+            "--target",
+            s(&cut),
+            "--out",
+            s(&out),
+        ]),
+        "cut.ply",
+        &[&out],
+    );
 }
 
 fn write_points(path: &Path, pts: &[[f64; 3]]) {
-    let body: String = pts.iter().map(|p| format!("{} {} {}\n", p[0], p[1], p[2])).collect();
+    let body: String = pts
+        .iter()
+        .map(|p| format!("{} {} {}\n", p[0], p[1], p[2]))
+        .collect();
     let text = format!(
         "ply\nformat ascii 1.0\nelement vertex {}\nproperty double x\nproperty double y\nproperty double z\nend_header\n{body}",
         pts.len()
@@ -109,7 +197,17 @@ fn nan_huge_and_too_few_points() {
     let dir = tempfile::tempdir().unwrap();
     let (t, u, _, pair) = inputs(dir.path());
     let out = dir.path().join("m.ply");
-    let run = |target: &Path| ribreg(&["register", "--template", s(&t), "--target", s(target), "--out", s(&out)]);
+    let run = |target: &Path| {
+        ribreg(&[
+            "register",
+            "--template",
+            s(&t),
+            "--target",
+            s(target),
+            "--out",
+            s(&out),
+        ])
+    };
     let p = dir.path().join("nan.ply");
     let mut pts = pair.target.clone();
     pts[7][1] = f64::NAN;
@@ -133,19 +231,45 @@ fn wrong_rib_count_in_the_template() {
     let (_, u, _, pair) = inputs(dir.path());
     let out = dir.path().join("m.ply");
     // Drop rib 5 (both sides): three ribs instead of four.
-    let keep: Vec<usize> = (0..pair.template.points.len()).filter(|&i| pair.template.labels[i] != 5).collect();
+    let keep: Vec<usize> = (0..pair.template.points.len())
+        .filter(|&i| pair.template.labels[i] != 5)
+        .collect();
     let t3 = dir.path().join("three_ribs.ply");
     let cloud = Cloud {
         points: keep.iter().map(|&i| pair.template.points[i]).collect(),
         labels: Some(keep.iter().map(|&i| pair.template.labels[i]).collect()),
     };
     io::write_ply(&t3, &cloud, PlyFormat::Ascii).unwrap();
-    assert_refused(&ribreg(&["register", "--template", s(&t3), "--target", s(&u), "--out", s(&out)]), "rib 5", &[&out]);
+    assert_refused(
+        &ribreg(&[
+            "register",
+            "--template",
+            s(&t3),
+            "--target",
+            s(&u),
+            "--out",
+            s(&out),
+        ]),
+        "rib 5",
+        &[&out],
+    );
     // A label that is no rib number.
     let mut bad = cloud.clone();
     bad.labels.as_mut().unwrap()[0] = 9;
     io::write_ply(&t3, &bad, PlyFormat::Ascii).unwrap();
-    assert_refused(&ribreg(&["register", "--template", s(&t3), "--target", s(&u), "--out", s(&out)]), "label 9", &[&out]);
+    assert_refused(
+        &ribreg(&[
+            "register",
+            "--template",
+            s(&t3),
+            "--target",
+            s(&u),
+            "--out",
+            s(&out),
+        ]),
+        "label 9",
+        &[&out],
+    );
 }
 
 #[test]
@@ -154,11 +278,41 @@ fn improved_method_needs_labels_and_usage_errors() {
     let (t, u, w, pair) = inputs(dir.path());
     let out = dir.path().join("m.ply");
     let unl = dir.path().join("unlabelled.ply");
-    io::write_ply(&unl, &Cloud { points: pair.template.points.clone(), labels: None }, PlyFormat::Ascii).unwrap();
-    assert_refused(&ribreg(&["register", "--template", s(&unl), "--target", s(&u), "--out", s(&out)]), "labelled", &[&out]);
+    io::write_ply(
+        &unl,
+        &Cloud {
+            points: pair.template.points.clone(),
+            labels: None,
+        },
+        PlyFormat::Ascii,
+    )
+    .unwrap();
+    assert_refused(
+        &ribreg(&[
+            "register",
+            "--template",
+            s(&unl),
+            "--target",
+            s(&u),
+            "--out",
+            s(&out),
+        ]),
+        "labelled",
+        &[&out],
+    );
     let ow = dir.path().join("m.csv");
     assert_refused(
-        &ribreg(&["register", "--template", s(&t), "--target", s(&u), "--out", s(&out), "--out-waypoints", s(&ow)]),
+        &ribreg(&[
+            "register",
+            "--template",
+            s(&t),
+            "--target",
+            s(&u),
+            "--out",
+            s(&out),
+            "--out-waypoints",
+            s(&ow),
+        ]),
         "--out-waypoints needs --waypoints",
         &[&out, &ow],
     );
@@ -166,8 +320,17 @@ fn improved_method_needs_labels_and_usage_errors() {
     let deep = dir.path().join("missing/dir/m.csv");
     assert_refused(
         &ribreg(&[
-            "register", "--template", s(&t), "--target", s(&u), "--waypoints", s(&w), "--out", s(&out),
-            "--out-waypoints", s(&deep),
+            "register",
+            "--template",
+            s(&t),
+            "--target",
+            s(&u),
+            "--waypoints",
+            s(&w),
+            "--out",
+            s(&out),
+            "--out-waypoints",
+            s(&deep),
         ]),
         "m.csv",
         &[&out, &deep],
@@ -179,13 +342,34 @@ fn paper_method_runs_on_an_unlabelled_template() {
     let dir = tempfile::tempdir().unwrap();
     let (_, u, _, pair) = inputs(dir.path());
     let unl = dir.path().join("unlabelled.ply");
-    io::write_ply(&unl, &Cloud { points: pair.template.points.clone(), labels: None }, PlyFormat::Ascii).unwrap();
+    io::write_ply(
+        &unl,
+        &Cloud {
+            points: pair.template.points.clone(),
+            labels: None,
+        },
+        PlyFormat::Ascii,
+    )
+    .unwrap();
     let out = dir.path().join("m.ply");
-    let o = ribreg(&["register", "--method", "paper", "--template", s(&unl), "--target", s(&u), "--out", s(&out)]);
+    let o = ribreg(&[
+        "register",
+        "--method",
+        "paper",
+        "--template",
+        s(&unl),
+        "--target",
+        s(&u),
+        "--out",
+        s(&out),
+    ]);
     // The paper's endpoint rule may or may not find 8 endpoints on this pair; either way
     // the run ends cleanly: success with an output, or one error line and no output.
     if o.status.success() {
-        assert_eq!(io::read_ply(&out).unwrap().points.len(), pair.template.points.len());
+        assert_eq!(
+            io::read_ply(&out).unwrap().points.len(),
+            pair.template.points.len()
+        );
     } else {
         assert_refused(&o, "", &[&out]);
     }

@@ -12,19 +12,47 @@ use ribreg_core::Vec3;
 #[test]
 fn working_state_fits_64_kib() {
     let rows = [
-        ("Template (CT skeleton, kept for every patient)", size_of::<Template>()),
-        ("Registration (target graph, skeleton, mapping)", size_of::<Registration>()),
-        ("TransformCache<128> (mapping)", size_of::<TransformCache<CACHE_CAPACITY>>()),
-        ("SkeletonGraph (one inside each of the two above)", size_of::<SkeletonGraph>()),
-        ("transient: SOM-1 map being trained", size_of::<Som<SOM1_CAPACITY>>()),
-        ("transient: ICP pairing buffer", SOM1_CAPACITY * size_of::<Vec3>()),
-        ("transient: carried template nodes (guided)", SOM1_CAPACITY * size_of::<Vec3>()),
+        (
+            "Template (CT skeleton, kept for every patient)",
+            size_of::<Template>(),
+        ),
+        (
+            "Registration (target graph, skeleton, mapping)",
+            size_of::<Registration>(),
+        ),
+        (
+            "TransformCache<128> (mapping)",
+            size_of::<TransformCache<CACHE_CAPACITY>>(),
+        ),
+        (
+            "SkeletonGraph (one inside each of the two above)",
+            size_of::<SkeletonGraph>(),
+        ),
+        (
+            "transient: SOM-1 map being trained",
+            size_of::<Som<SOM1_CAPACITY>>(),
+        ),
+        (
+            "transient: ICP pairing buffer",
+            SOM1_CAPACITY * size_of::<Vec3>(),
+        ),
+        (
+            "transient: carried template nodes (guided)",
+            SOM1_CAPACITY * size_of::<Vec3>(),
+        ),
     ];
     for (name, bytes) in rows {
         println!("{name:50} {bytes:6} B  {:5.1} KiB", bytes as f64 / 1024.0);
     }
-    let kept = size_of::<Template>() + size_of::<Registration>() + size_of::<TransformCache<CACHE_CAPACITY>>();
+    let kept = size_of::<Template>()
+        + size_of::<Registration>()
+        + size_of::<TransformCache<CACHE_CAPACITY>>();
     let transient = size_of::<Som<SOM1_CAPACITY>>() + 2 * SOM1_CAPACITY * size_of::<Vec3>();
-    println!("{:50} {:6} B  {:5.1} KiB", "total (kept + largest transient)", kept + transient, (kept + transient) as f64 / 1024.0);
+    println!(
+        "{:50} {:6} B  {:5.1} KiB",
+        "total (kept + largest transient)",
+        kept + transient,
+        (kept + transient) as f64 / 1024.0
+    );
     assert!(kept + transient < 64 * 1024);
 }

@@ -1,1 +1,5 @@
+//! Host tests of ribreg: an independent `f64` reference of the pipeline ([`reference`])
+//! and shared test helpers ([`support`]).
 
+pub mod reference;
+pub mod support;
