@@ -134,7 +134,8 @@ pub fn run_demo(
     let text = serde_json::to_string_pretty(&outcome.report)
         .map_err(|e| CliError::Usage(format!("report: {e}")))?;
     io::write_text(&out.join("report.json"), &text)?;
-    write_figures(out, &template, &target, &outcome, &pair.true_waypoints)?;
+    let mine = vec![(format!("ribreg ({})", method.name()), to_file(&mapped))];
+    write_figures(out, &template, &target, &outcome, &pair.true_waypoints, &mine)?;
     progress(&format!(
         "wrote {} (registered.ply, mapped_waypoints.csv, report.json, figures)",
         out.display()
@@ -189,50 +190,41 @@ fn skeleton_panels(
     }
 }
 
-/// Writes `skeleton_template`, `skeleton_target` and `waypoints` figures (SVG + PNG).
-fn write_figures(
+/// Writes `skeleton_template`, `skeleton_target` (the paper's Fig. 4) and `waypoints`
+/// (Fig. 6: the true waypoints and each method's mapped ones, target frame) figures,
+/// SVG + PNG, into `out`.
+pub fn write_figures(
     out: &Path,
     template: &[Vec3],
     target: &[Vec3],
     outcome: &crate::register::RegisterOutcome,
     truth: &[[f64; 3]],
+    methods: &[(String, Vec<[f64; 3]>)],
 ) -> Result<(), CliError> {
     let fig = |e: plot::PlotError| CliError::Usage(format!("figure: {e}"));
     let tpl = &outcome.template;
     let reg = &outcome.registration;
     let panels = skeleton_panels(template, &tpl.graph, &tpl.skeleton, &Rigid::identity());
-    plot::skeleton_figure(
-        &out.join("skeleton_template"),
-        "CT template skeleton (patient frame)",
-        &panels,
-    )
-    .map_err(fig)?;
+    plot::skeleton_figure(&out.join("skeleton_template"), "CT template skeleton (patient frame)", &panels)
+        .map_err(fig)?;
     let panels = skeleton_panels(target, &reg.graph, &reg.skeleton, &reg.pose);
-    plot::skeleton_figure(
-        &out.join("skeleton_target"),
-        "US target skeleton (rigidly aligned to the template)",
-        &panels,
-    )
-    .map_err(fig)?;
-    // Waypoint transfer in the target frame, seen from the template's coronal plane.
-    let view = |p: &Vec3| {
-        let q = reg.pose.apply(p);
+    plot::skeleton_figure(&out.join("skeleton_target"), "US target skeleton (rigidly aligned to the template)", &panels)
+        .map_err(fig)?;
+    // Target frame, seen on the template's coronal plane (through the rigid pose).
+    let view = |p: &[f64; 3]| {
+        let q = reg.pose.apply(&Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32));
         [f64::from(q.x), f64::from(q.y)]
     };
-    let truth_v: Vec<Vec3> = truth
+    let sets: Vec<plot::WaypointSet> = methods
         .iter()
-        .map(|t| Vec3::new(t[0] as f32, t[1] as f32, t[2] as f32))
+        .map(|(label, pts)| plot::WaypointSet { label: label.clone(), points: pts.iter().map(view).collect() })
         .collect();
-    let mapped = outcome.waypoints.clone().unwrap_or_default();
     plot::waypoint_transfer(
         &out.join("waypoints"),
         "Planned waypoints mapped onto the patient",
-        &target.iter().map(view).collect::<Vec<_>>(),
-        &truth_v.iter().map(view).collect::<Vec<_>>(),
-        &[plot::WaypointSet {
-            label: "ribreg".into(),
-            points: mapped.iter().map(view).collect(),
-        }],
+        &to_file(target).iter().map(view).collect::<Vec<_>>(),
+        &truth.iter().map(view).collect::<Vec<_>>(),
+        &sets,
     )
     .map_err(fig)
 }

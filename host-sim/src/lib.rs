@@ -7,3 +7,4 @@ pub mod phantom;
 pub mod plot;
 pub mod prep;
 pub mod register;
+pub mod stats;
