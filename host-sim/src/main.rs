@@ -2,8 +2,10 @@
 
 use clap::{Parser, Subcommand};
 use ribreg_sim::demo;
+use ribreg_sim::eval::{self, EvalConfig, EvalMethod};
 use ribreg_sim::phantom::{PhantomConfig, PhantomPair, Variant};
 use ribreg_sim::register::{self, Method, RegisterJob};
+use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -24,32 +26,7 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Register a CT template cloud onto a US target cloud and map waypoints.
-    Register {
-        /// CT template point cloud (PLY; optional integer `label`: rib 2..5, 1 = sternum).
-        #[arg(long)]
-        template: PathBuf,
-        /// US target point cloud (PLY).
-        #[arg(long)]
-        target: PathBuf,
-        /// Planned waypoints on the template (CSV with header `x,y,z`, mm).
-        #[arg(long)]
-        waypoints: Option<PathBuf>,
-        /// Output: the template's points, same order, registered (PLY).
-        #[arg(long)]
-        out: PathBuf,
-        /// Output: mapped waypoints (CSV `x,y,z`).
-        #[arg(long)]
-        out_waypoints: Option<PathBuf>,
-        /// Output: JSON report (skeletons, endpoint match, ED/HD, timings).
-        #[arg(long)]
-        report: Option<PathBuf>,
-        /// Write the output PLY as ASCII (default: binary little-endian).
-        #[arg(long)]
-        ascii: bool,
-        #[arg(long, value_enum, default_value_t = MethodArg::Improved)]
-        /// `paper`: as published; `improved`: guided ribs + anterior template (needs labels).
-        method: MethodArg,
-    },
+    Register(RegisterJob),
     /// Write a phantom pair (CT template, US target, waypoints, ground truth) to a folder.
     Phantom {
         /// Output folder (created if missing).
@@ -66,24 +43,35 @@ enum Command {
         #[command(flatten)]
         phantom: PhantomArgs,
         /// `paper`: as published; `improved`: guided ribs + anterior template.
-        #[arg(long, value_enum, default_value_t = MethodArg::Improved)]
-        method: MethodArg,
+        #[arg(long, value_enum, default_value_t = Method::Improved)]
+        method: Method,
+    },
+    /// Run ours (paper and improved) and the baselines on phantom pairs; write tables and figures.
+    Eval {
+        /// Phantom pairs per variant (seeds 0..N).
+        #[arg(long, default_value_t = 20)]
+        pairs: u64,
+        /// Which pose variants.
+        #[arg(long, value_enum, default_value_t = Variants::Both)]
+        variants: Variants,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        jobs: Option<usize>,
+        /// Only our two methods (skip the slower baselines).
+        #[arg(long)]
+        ours_only: bool,
+        /// Output folder (created if missing).
+        #[arg(long, default_value = "out/eval")]
+        out_dir: PathBuf,
     },
 }
 
+/// Which pose variants `eval` runs.
 #[derive(Clone, Copy, clap::ValueEnum)]
-enum MethodArg {
-    Paper,
-    Improved,
-}
-
-impl From<MethodArg> for Method {
-    fn from(m: MethodArg) -> Method {
-        match m {
-            MethodArg::Paper => Method::Paper,
-            MethodArg::Improved => Method::Improved,
-        }
-    }
+enum Variants {
+    Both,
+    Aligned,
+    Misaligned,
 }
 
 #[derive(clap::Args)]
@@ -92,25 +80,15 @@ struct PhantomArgs {
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// Pose of the US target: a few degrees/mm, or up to ~20° and ~40 mm.
-    #[arg(long, value_enum, default_value_t = VariantArg::Aligned)]
-    variant: VariantArg,
-}
-
-#[derive(Clone, Copy, clap::ValueEnum)]
-enum VariantArg {
-    Aligned,
-    Misaligned,
+    #[arg(long, value_enum, default_value_t = Variant::Aligned)]
+    variant: Variant,
 }
 
 impl PhantomArgs {
     fn config(&self) -> PhantomConfig {
-        let variant = match self.variant {
-            VariantArg::Aligned => Variant::Aligned,
-            VariantArg::Misaligned => Variant::Misaligned,
-        };
         PhantomConfig {
             seed: self.seed,
-            variant,
+            variant: self.variant,
             ..PhantomConfig::default()
         }
     }
@@ -125,37 +103,16 @@ fn main() -> ExitCode {
         }
     };
     let result = match cli.command {
-        Command::Register {
-            template,
-            target,
-            waypoints,
-            out,
-            out_waypoints,
-            report,
-            ascii,
-            method,
-        } => {
-            let job = RegisterJob {
-                template,
-                target,
-                waypoints,
-                out,
-                out_waypoints,
-                report,
-                ascii,
-                method: method.into(),
-            };
-            register::run(&job, &mut progress).map(|o| {
-                println!(
-                    "registered {} points: ED {:.2} ± {:.2} mm (max {:.2}), HD {:.2} mm",
-                    o.registered.len(),
-                    o.metrics.ed.mean,
-                    o.metrics.ed.sd,
-                    o.metrics.ed.max,
-                    o.metrics.hausdorff
-                );
-            })
-        }
+        Command::Register(job) => register::run(&job, &mut progress).map(|o| {
+            println!(
+                "registered {} points: ED {:.2} ± {:.2} mm (max {:.2}), HD {:.2} mm",
+                o.registered.len(),
+                o.metrics.ed.mean,
+                o.metrics.ed.sd,
+                o.metrics.ed.max,
+                o.metrics.hausdorff
+            );
+        }),
         Command::Phantom { out_dir, phantom } => {
             let pair = PhantomPair::generate(&phantom.config());
             demo::write_phantom(&pair, &out_dir).map(|()| {
@@ -171,7 +128,7 @@ fn main() -> ExitCode {
             out_dir,
             phantom,
             method,
-        } => demo::run_demo(&phantom.config(), method.into(), &out_dir, &mut progress).map(|r| {
+        } => demo::run_demo(&phantom.config(), method, &out_dir, &mut progress).map(|r| {
             let g = &r["ground_truth"];
             println!(
                 "demo: waypoint error {:.2} ± {:.2} mm (max {:.2}), dense error {:.2} mm, \
@@ -186,6 +143,42 @@ fn main() -> ExitCode {
                 out_dir.display()
             );
         }),
+        Command::Eval {
+            pairs,
+            variants,
+            jobs,
+            ours_only,
+            out_dir,
+        } => {
+            let variants = match variants {
+                Variants::Both => vec![Variant::Aligned, Variant::Misaligned],
+                Variants::Aligned => vec![Variant::Aligned],
+                Variants::Misaligned => vec![Variant::Misaligned],
+            };
+            let mut methods = EvalMethod::all();
+            if ours_only {
+                methods.retain(|m| matches!(m, EvalMethod::Ours(..)));
+            }
+            let jobs =
+                jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+            let cfg = EvalConfig {
+                pairs,
+                variants,
+                methods,
+                jobs,
+            };
+            let tty = std::io::stderr().is_terminal();
+            let mut line = |l: &str| match (quiet, tty) {
+                (true, _) => {}
+                (false, true) => eprint!("\r{l}   "),
+                (false, false) => eprintln!("{l}"),
+            };
+            let r = eval::run_eval(&cfg, &out_dir, &mut line);
+            if tty && !quiet {
+                eprintln!();
+            }
+            r.map(|table| println!("{table}\nwrote {}", out_dir.display()))
+        }
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

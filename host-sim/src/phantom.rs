@@ -301,7 +301,7 @@ fn derive_seed(seed: u64, stream: u64) -> u64 {
 // ---------------------------------------------------------------------------------------
 
 /// How far the US target is posed away from the patient frame.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 pub enum Variant {
     /// Nearly aligned: rotation up to [`ALIGNED_MAX_ROTATION_DEG`] about a random axis,
     /// translation up to [`ALIGNED_MAX_TRANSLATION_MM`].

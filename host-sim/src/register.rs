@@ -20,12 +20,12 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// Which registration to run.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum Method {
     /// The paper's method as published (graph rib model, whole template surface).
     Paper,
     /// The paper's method with this project's improvements: guided rib model and an
-    /// anterior-surface template (see `ribreg_core::guided` and [`crate::prep`]). Needs a
+    /// anterior-surface template (ribreg_core::guided, ribreg_sim::prep). Needs a
     /// labelled template.
     #[default]
     Improved,
@@ -52,24 +52,32 @@ impl Method {
 /// Transform cache capacity on the host (distinct 10-neighbour sets kept).
 pub const HOST_CACHE: usize = 1024;
 
-/// Inputs and outputs of one `register` run.
-#[derive(Clone, Debug, Default)]
+/// Inputs and outputs of one `register` run (the `ribreg register` arguments).
+#[derive(Clone, Debug, Default, clap::Args)]
 pub struct RegisterJob {
-    /// CT template cloud (PLY, optional `label`).
+    /// CT template point cloud (PLY; optional integer `label`: rib 2..5, 1 = sternum).
+    #[arg(long)]
     pub template: PathBuf,
-    /// US target cloud (PLY).
+    /// US target point cloud (PLY).
+    #[arg(long)]
     pub target: PathBuf,
-    /// Planned waypoints on the template (CSV `x,y,z`).
+    /// Planned waypoints on the template (CSV with header `x,y,z`, mm).
+    #[arg(long)]
     pub waypoints: Option<PathBuf>,
-    /// Registered template cloud (PLY, same order as the template).
+    /// Output: the template's points, same order, registered (PLY).
+    #[arg(long)]
     pub out: PathBuf,
-    /// Mapped waypoints (CSV).
+    /// Output: mapped waypoints (CSV `x,y,z`).
+    #[arg(long)]
     pub out_waypoints: Option<PathBuf>,
-    /// JSON report.
+    /// Output: JSON report (skeletons, rigid part, ED/HD, timings).
+    #[arg(long)]
     pub report: Option<PathBuf>,
-    /// Write the output PLY as ASCII instead of binary little-endian.
+    /// Write the output PLY as ASCII (default: binary little-endian).
+    #[arg(long)]
     pub ascii: bool,
-    /// Which registration to run.
+    /// `paper`: as published; `improved`: guided ribs + anterior template (needs labels).
+    #[arg(long, value_enum, default_value_t = Method::Improved)]
     pub method: Method,
 }
 
