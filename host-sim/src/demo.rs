@@ -135,7 +135,14 @@ pub fn run_demo(
         .map_err(|e| CliError::Usage(format!("report: {e}")))?;
     io::write_text(&out.join("report.json"), &text)?;
     let mine = vec![(format!("ribreg ({})", method.name()), to_file(&mapped))];
-    write_figures(out, &template, &target, &outcome, &pair.true_waypoints, &mine)?;
+    write_figures(
+        out,
+        &template,
+        &target,
+        &outcome,
+        &pair.true_waypoints,
+        &mine,
+    )?;
     progress(&format!(
         "wrote {} (registered.ply, mapped_waypoints.csv, report.json, figures)",
         out.display()
@@ -205,19 +212,32 @@ pub fn write_figures(
     let tpl = &outcome.template;
     let reg = &outcome.registration;
     let panels = skeleton_panels(template, &tpl.graph, &tpl.skeleton, &Rigid::identity());
-    plot::skeleton_figure(&out.join("skeleton_template"), "CT template skeleton (patient frame)", &panels)
-        .map_err(fig)?;
+    plot::skeleton_figure(
+        &out.join("skeleton_template"),
+        "CT template skeleton (patient frame)",
+        &panels,
+    )
+    .map_err(fig)?;
     let panels = skeleton_panels(target, &reg.graph, &reg.skeleton, &reg.pose);
-    plot::skeleton_figure(&out.join("skeleton_target"), "US target skeleton (rigidly aligned to the template)", &panels)
-        .map_err(fig)?;
+    plot::skeleton_figure(
+        &out.join("skeleton_target"),
+        "US target skeleton (rigidly aligned to the template)",
+        &panels,
+    )
+    .map_err(fig)?;
     // Target frame, seen on the template's coronal plane (through the rigid pose).
     let view = |p: &[f64; 3]| {
-        let q = reg.pose.apply(&Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32));
+        let q = reg
+            .pose
+            .apply(&Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32));
         [f64::from(q.x), f64::from(q.y)]
     };
     let sets: Vec<plot::WaypointSet> = methods
         .iter()
-        .map(|(label, pts)| plot::WaypointSet { label: label.clone(), points: pts.iter().map(view).collect() })
+        .map(|(label, pts)| plot::WaypointSet {
+            label: label.clone(),
+            points: pts.iter().map(view).collect(),
+        })
         .collect();
     plot::waypoint_transfer(
         &out.join("waypoints"),

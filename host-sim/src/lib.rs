@@ -1,7 +1,9 @@
 #![doc = include_str!("../../README.md")]
 #![warn(missing_docs)]
 
+pub mod baselines;
 pub mod demo;
+pub mod eval;
 pub mod io;
 pub mod phantom;
 pub mod plot;

@@ -22,7 +22,12 @@ impl Summary {
         }
         let mean = values.iter().sum::<f64>() / n as f64;
         let sd = (values.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n as f64).sqrt();
-        Summary { mean, sd, max: values.iter().copied().fold(f64::NEG_INFINITY, f64::max), n }
+        Summary {
+            mean,
+            sd,
+            max: values.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+            n,
+        }
     }
 }
 
@@ -141,11 +146,16 @@ mod tests {
         let (t, p) = paired_t_test(&a, &b).unwrap();
         assert!((t - -3.527_668_414_752_787_5).abs() < 1e-12);
         assert!((p - 0.009_627_924_725_379_822).abs() < 1e-12);
-        for (t, df, want) in
-            [(2.5, 7.0, 0.040_992_218_585_752_89), (0.3, 3.0, 0.783_763_292_039_919), (10.0, 40.0, 1.931_311_700_411_550_6e-12)]
-        {
+        for (t, df, want) in [
+            (2.5, 7.0, 0.040_992_218_585_752_89),
+            (0.3, 3.0, 0.783_763_292_039_919),
+            (10.0, 40.0, 1.931_311_700_411_550_6e-12),
+        ] {
             let p = t_two_sided_p(t, df);
-            assert!((p - want).abs() <= 1e-10 * want.max(1e-3), "t {t} df {df}: {p} vs {want}");
+            assert!(
+                (p - want).abs() <= 1e-10 * want.max(1e-3),
+                "t {t} df {df}: {p} vs {want}"
+            );
         }
         assert!(paired_t_test(&[1.0, 2.0], &[0.0, 1.0]).is_none());
         assert!(paired_t_test(&[1.0], &[0.0]).is_none());

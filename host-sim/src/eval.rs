@@ -1,0 +1,454 @@
+//! `ribreg eval`: every method on N phantom pairs (aligned and misaligned), in parallel,
+//! with a progress line, written as a markdown + JSON table like the paper's Table I,
+//! paired t-tests, and figures.
+
+use crate::baselines;
+use crate::demo::write_figures;
+use crate::io;
+use crate::phantom::{PhantomConfig, PhantomPair, Variant};
+use crate::plot::{self, Series};
+use crate::register::{register_clouds, to_core, to_file, CliError, Method};
+use crate::stats::{paired_t_test, Summary};
+use ribreg_core::error::Cloud as Which;
+use ribreg_core::metrics::compare;
+use ribreg_core::Vec3;
+use serde_json::{json, Value};
+use std::fmt::Write as _;
+use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+use std::time::Instant;
+
+/// A method compared by `eval`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EvalMethod {
+    /// Ours, paper or improved, with the template's labels or without.
+    Ours(Method, bool),
+    /// A baseline.
+    Baseline(baselines::Method),
+}
+
+impl EvalMethod {
+    /// Every method, ours first.
+    pub fn all() -> Vec<EvalMethod> {
+        let mut v = vec![
+            EvalMethod::Ours(Method::Improved, true),
+            EvalMethod::Ours(Method::Paper, true),
+            EvalMethod::Ours(Method::Paper, false),
+        ];
+        v.extend(
+            baselines::Method::ALL
+                .iter()
+                .map(|&m| EvalMethod::Baseline(m)),
+        );
+        v
+    }
+
+    /// Name in tables and figures.
+    pub fn name(self) -> String {
+        match self {
+            EvalMethod::Ours(m, true) => format!("ours ({})", m.name()),
+            EvalMethod::Ours(m, false) => format!("ours ({}, unlabelled)", m.name()),
+            EvalMethod::Baseline(m) => m.name().to_string(),
+        }
+    }
+}
+
+/// What `eval` runs.
+#[derive(Clone, Debug)]
+pub struct EvalConfig {
+    /// Phantom pairs per variant (seeds `0..pairs`).
+    pub pairs: u64,
+    /// Pose variants.
+    pub variants: Vec<Variant>,
+    /// Methods.
+    pub methods: Vec<EvalMethod>,
+    /// Worker threads.
+    pub jobs: usize,
+}
+
+/// One method on one phantom pair.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CaseResult {
+    /// Method name.
+    pub method: String,
+    /// `aligned` or `misaligned`.
+    pub variant: String,
+    /// Phantom seed.
+    pub seed: u64,
+    /// Why the method failed, if it did (then the numbers are absent).
+    pub error: Option<String>,
+    /// Registered template → target closest-point distances (mm).
+    pub ed: Summary,
+    /// Symmetric Hausdorff distance (mm).
+    pub hd: f64,
+    /// Registered template points against their true positions (mm).
+    pub dense: Summary,
+    /// Per-waypoint errors (mm), waypoint order.
+    pub waypoint_errors: Vec<f64>,
+    /// Wall time of the registration and mapping (ms).
+    pub runtime_ms: f64,
+}
+
+fn variant_name(v: Variant) -> &'static str {
+    match v {
+        Variant::Aligned => "aligned",
+        Variant::Misaligned => "misaligned",
+    }
+}
+
+/// A method's output on one pair: mapped template points, mapped waypoints, time (ms).
+type Mapped = (Vec<[f64; 3]>, Vec<[f64; 3]>, f64);
+
+/// Runs one method on one pair; `Err` carries the method's own error message.
+fn run_method(m: EvalMethod, pair: &PhantomPair) -> Result<Mapped, String> {
+    let t0 = Instant::now();
+    match m {
+        EvalMethod::Ours(method, labelled) => {
+            let tpl = to_core(&pair.template.points, Which::Template).map_err(|e| e.to_string())?;
+            let tgt = to_core(&pair.target, Which::Target).map_err(|e| e.to_string())?;
+            let wps = to_core(&pair.template_waypoints, Which::Query).map_err(|e| e.to_string())?;
+            let labels: Vec<u8> = pair
+                .template
+                .labels
+                .iter()
+                .map(|&l| u8::try_from(l).unwrap_or(0))
+                .collect();
+            let labels = labelled.then_some(labels.as_slice());
+            let o = register_clouds(&tpl, labels, &tgt, Some(&wps), method, &mut |_| ())
+                .map_err(|e| e.to_string())?;
+            let ms = t0.elapsed().as_secs_f64() * 1e3;
+            Ok((
+                to_file(&o.registered),
+                to_file(&o.waypoints.unwrap_or_default()),
+                ms,
+            ))
+        }
+        EvalMethod::Baseline(b) => {
+            let map = baselines::run(b, &pair.template.points, &pair.target)
+                .map_err(|e| e.to_string())?;
+            let dense = map.map_all(&pair.template.points);
+            let wps = map.map_all(&pair.template_waypoints);
+            Ok((dense, wps, t0.elapsed().as_secs_f64() * 1e3))
+        }
+    }
+}
+
+fn evaluate(m: EvalMethod, pair: &PhantomPair, variant: Variant, seed: u64) -> CaseResult {
+    let mut r = CaseResult {
+        method: m.name(),
+        variant: variant_name(variant).into(),
+        seed,
+        error: None,
+        ed: Summary::default(),
+        hd: f64::NAN,
+        dense: Summary::default(),
+        waypoint_errors: vec![],
+        runtime_ms: f64::NAN,
+    };
+    match run_method(m, pair) {
+        Err(e) => r.error = Some(e),
+        Ok((dense, wps, ms)) => {
+            let to32 = |p: &[[f64; 3]]| -> Vec<Vec3> {
+                p.iter()
+                    .map(|q| Vec3::new(q[0] as f32, q[1] as f32, q[2] as f32))
+                    .collect()
+            };
+            let mut reg = to32(&dense);
+            let mut tgt = to32(&pair.target);
+            let metrics = compare(&mut reg, &mut tgt);
+            r.ed = Summary {
+                mean: f64::from(metrics.ed.mean),
+                sd: f64::from(metrics.ed.sd),
+                max: f64::from(metrics.ed.max),
+                n: metrics.ed.count as usize,
+            };
+            r.hd = f64::from(metrics.hausdorff);
+            let truth = pair.true_positions();
+            let d: Vec<f64> = dense.iter().zip(&truth).map(|(a, b)| dist(a, b)).collect();
+            r.dense = Summary::of(&d);
+            r.waypoint_errors = wps
+                .iter()
+                .zip(&pair.true_waypoints)
+                .map(|(a, b)| dist(a, b))
+                .collect();
+            r.runtime_ms = ms;
+        }
+    }
+    r
+}
+
+fn dist(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+/// Runs the evaluation and writes `out/table.md`, `out/results.json` and the figures.
+/// Returns the markdown table.
+pub fn run_eval(
+    cfg: &EvalConfig,
+    out: &Path,
+    progress: &mut (dyn FnMut(&str) + Send),
+) -> Result<String, CliError> {
+    std::fs::create_dir_all(out).map_err(|e| {
+        CliError::Usage(format!(
+            "{}: cannot create the directory: {e}",
+            out.display()
+        ))
+    })?;
+    let cases: Vec<(Variant, u64)> = cfg
+        .variants
+        .iter()
+        .flat_map(|&v| (0..cfg.pairs).map(move |s| (v, s)))
+        .collect();
+    let next = AtomicUsize::new(0);
+    let done = AtomicUsize::new(0);
+    let results = Mutex::new(Vec::<CaseResult>::new());
+    let progress = Mutex::new(progress);
+    let t0 = Instant::now();
+    std::thread::scope(|s| {
+        for _ in 0..cfg.jobs.max(1) {
+            s.spawn(|| loop {
+                let k = next.fetch_add(1, Ordering::Relaxed);
+                let Some(&(variant, seed)) = cases.get(k) else {
+                    break;
+                };
+                let pair = PhantomPair::generate(&PhantomConfig {
+                    seed,
+                    variant,
+                    ..PhantomConfig::default()
+                });
+                let rows: Vec<CaseResult> = cfg
+                    .methods
+                    .iter()
+                    .map(|&m| evaluate(m, &pair, variant, seed))
+                    .collect();
+                results
+                    .lock()
+                    .unwrap_or_else(|p| p.into_inner())
+                    .extend(rows);
+                let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+                let mut p = progress.lock().unwrap_or_else(|p| p.into_inner());
+                p(&format!(
+                    "eval: {n}/{} pairs ({} methods each), {:.0} s",
+                    cases.len(),
+                    cfg.methods.len(),
+                    t0.elapsed().as_secs_f64()
+                ));
+            });
+        }
+    });
+    let mut results = results.into_inner().unwrap_or_else(|p| p.into_inner());
+    results.sort_by(|a, b| (&a.variant, a.seed, &a.method).cmp(&(&b.variant, b.seed, &b.method)));
+    let table = markdown(cfg, &results);
+    io::write_text(&out.join("table.md"), &table)?;
+    let json = json!({ "pairs": cfg.pairs, "methods": cfg.methods.iter().map(|m| m.name()).collect::<Vec<_>>(),
+        "summary": summary_json(cfg, &results), "cases": results });
+    let text = serde_json::to_string_pretty(&json)
+        .map_err(|e| CliError::Usage(format!("results: {e}")))?;
+    io::write_text(&out.join("results.json"), &text)?;
+    figures(cfg, &results, out)?;
+    Ok(table)
+}
+
+fn rows<'a>(results: &'a [CaseResult], m: &str, v: &str) -> impl Iterator<Item = &'a CaseResult> {
+    let (m, v) = (m.to_string(), v.to_string());
+    results
+        .iter()
+        .filter(move |r| r.method == m && r.variant == v)
+}
+
+/// Per-waypoint errors of a method, in (seed, waypoint) order, failed cases left out.
+fn waypoint_errors(results: &[CaseResult], m: &str, v: &str) -> Vec<(u64, usize, f64)> {
+    rows(results, m, v)
+        .filter(|r| r.error.is_none())
+        .flat_map(|r| {
+            r.waypoint_errors
+                .iter()
+                .enumerate()
+                .map(move |(i, &e)| (r.seed, i, e))
+        })
+        .collect()
+}
+
+fn summary_json(cfg: &EvalConfig, results: &[CaseResult]) -> Value {
+    let mut out = serde_json::Map::new();
+    for &v in &cfg.variants {
+        let v = variant_name(v);
+        let mut per = serde_json::Map::new();
+        for m in &cfg.methods {
+            let name = m.name();
+            let ok: Vec<&CaseResult> = rows(results, &name, v)
+                .filter(|r| r.error.is_none())
+                .collect();
+            let wp: Vec<f64> = waypoint_errors(results, &name, v)
+                .iter()
+                .map(|w| w.2)
+                .collect();
+            let mut rt: Vec<f64> = ok.iter().map(|r| r.runtime_ms).collect();
+            rt.sort_by(f64::total_cmp);
+            per.insert(
+                name.clone(),
+                json!({
+                    "cases": rows(results, &name, v).count(),
+                    "failed": rows(results, &name, v).filter(|r| r.error.is_some()).count(),
+                    "ed_mean": Summary::of(&ok.iter().map(|r| r.ed.mean).collect::<Vec<_>>()),
+                    "ed_max": Summary::of(&ok.iter().map(|r| r.ed.max).collect::<Vec<_>>()),
+                    "hd": Summary::of(&ok.iter().map(|r| r.hd).collect::<Vec<_>>()),
+                    "dense_mean": Summary::of(&ok.iter().map(|r| r.dense.mean).collect::<Vec<_>>()),
+                    "waypoint": Summary::of(&wp),
+                    "runtime_ms_median": rt.get(rt.len() / 2),
+                    "t_test_vs_ours": t_test(results, &cfg.methods[0].name(), &name, v),
+                }),
+            );
+        }
+        out.insert(v.into(), Value::Object(per));
+    }
+    Value::Object(out)
+}
+
+/// Paired t-test of the waypoint errors of `ours` against `other` (pairs present in both).
+fn t_test(results: &[CaseResult], ours: &str, other: &str, v: &str) -> Option<(f64, f64)> {
+    if ours == other {
+        return None;
+    }
+    let a = waypoint_errors(results, ours, v);
+    let b = waypoint_errors(results, other, v);
+    let (x, y): (Vec<f64>, Vec<f64>) = a
+        .iter()
+        .filter_map(|&(s, i, e)| b.iter().find(|w| w.0 == s && w.1 == i).map(|w| (e, w.2)))
+        .unzip();
+    paired_t_test(&x, &y)
+}
+
+fn markdown(cfg: &EvalConfig, results: &[CaseResult]) -> String {
+    let mut s = String::new();
+    let ours = cfg.methods[0].name();
+    let _ = writeln!(
+        s,
+        "Phantom pairs per variant: {} (seeds 0..{}). Errors in mm, mean ± SD over pairs \
+         (waypoints: over all waypoints of all pairs); p: paired t-test of the waypoint \
+         errors against {ours}.\n",
+        cfg.pairs, cfg.pairs
+    );
+    for &v in &cfg.variants {
+        let v = variant_name(v);
+        let _ = writeln!(s, "### {v}\n");
+        let _ = writeln!(
+            s,
+            "| method | failed | ED mean | ED max | HD | dense error | waypoint error | waypoint max | runtime (median) | p vs {ours} |"
+        );
+        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");
+        for m in &cfg.methods {
+            let name = m.name();
+            let all: Vec<&CaseResult> = rows(results, &name, v).collect();
+            let ok: Vec<&CaseResult> = all.iter().copied().filter(|r| r.error.is_none()).collect();
+            let f = |g: &dyn Fn(&CaseResult) -> f64| {
+                Summary::of(&ok.iter().map(|r| g(r)).collect::<Vec<_>>())
+            };
+            let (ed, edmax, hd, dense) = (
+                f(&|r| r.ed.mean),
+                f(&|r| r.ed.max),
+                f(&|r| r.hd),
+                f(&|r| r.dense.mean),
+            );
+            let wp = Summary::of(
+                &waypoint_errors(results, &name, v)
+                    .iter()
+                    .map(|w| w.2)
+                    .collect::<Vec<_>>(),
+            );
+            let mut rt: Vec<f64> = ok.iter().map(|r| r.runtime_ms).collect();
+            rt.sort_by(f64::total_cmp);
+            let p = match t_test(results, &ours, &name, v) {
+                Some((_, p)) => format!("{p:.1e}"),
+                None => "—".into(),
+            };
+            let _ = writeln!(
+                s,
+                "| {name} | {}/{} | {:.2} ± {:.2} | {:.1} | {:.1} ± {:.1} | {:.2} ± {:.2} | {:.2} ± {:.2} | {:.1} | {:.0} ms | {p} |",
+                all.len() - ok.len(),
+                all.len(),
+                ed.mean,
+                ed.sd,
+                edmax.mean,
+                hd.mean,
+                hd.sd,
+                dense.mean,
+                dense.sd,
+                wp.mean,
+                wp.sd,
+                wp.max,
+                rt.get(rt.len() / 2).copied().unwrap_or(f64::NAN),
+            );
+        }
+        let _ = writeln!(s);
+    }
+    let failures: Vec<&CaseResult> = results.iter().filter(|r| r.error.is_some()).collect();
+    if !failures.is_empty() {
+        let _ = writeln!(s, "Failures:\n");
+        for r in failures {
+            let _ = writeln!(
+                s,
+                "- {} {} seed {}: {}",
+                r.method,
+                r.variant,
+                r.seed,
+                r.error.as_deref().unwrap_or("")
+            );
+        }
+    }
+    s
+}
+
+fn figures(cfg: &EvalConfig, results: &[CaseResult], out: &Path) -> Result<(), CliError> {
+    let fig = |e: plot::PlotError| CliError::Usage(format!("figure: {e}"));
+    for &v in &cfg.variants {
+        let v = variant_name(v);
+        let series: Vec<Series> = cfg
+            .methods
+            .iter()
+            .map(|m| Series {
+                label: m.name(),
+                values: waypoint_errors(results, &m.name(), v)
+                    .iter()
+                    .map(|w| w.2)
+                    .collect(),
+            })
+            .collect();
+        plot::error_distributions(
+            &out.join(format!("waypoint_errors_{v}")),
+            &format!("Waypoint error per method ({v} pairs)"),
+            "waypoint error (mm)",
+            &series,
+            Some((5.0, "clinical tolerance 5 mm")),
+        )
+        .map_err(fig)?;
+    }
+    // Fig. 4 and Fig. 6 for the first aligned pair.
+    let pair = PhantomPair::generate(&PhantomConfig {
+        seed: 0,
+        ..PhantomConfig::default()
+    });
+    let tpl = to_core(&pair.template.points, Which::Template)?;
+    let tgt = to_core(&pair.target, Which::Target)?;
+    let labels: Vec<u8> = pair
+        .template
+        .labels
+        .iter()
+        .map(|&l| u8::try_from(l).unwrap_or(0))
+        .collect();
+    let outcome = register_clouds(
+        &tpl,
+        Some(&labels),
+        &tgt,
+        None,
+        Method::Improved,
+        &mut |_| (),
+    )?;
+    let mapped: Vec<(String, Vec<[f64; 3]>)> = cfg
+        .methods
+        .iter()
+        .filter_map(|&m| run_method(m, &pair).ok().map(|(_, w, _)| (m.name(), w)))
+        .collect();
+    write_figures(out, &tpl, &tgt, &outcome, &pair.true_waypoints, &mapped)
+}
