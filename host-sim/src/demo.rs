@@ -14,7 +14,7 @@ use std::path::Path;
 use std::time::Instant;
 
 /// Writes a phantom pair into `dir` (created if missing): `template.ply` (with labels),
-/// `template_mesh.ply`, `target.ply`, `waypoints.csv` (planned, template frame),
+/// `template_mesh.ply` and `.obj`, `target.ply`, `waypoints.csv` (planned, template frame),
 /// `true_waypoints.csv` (ground truth, target frame) and `params.json`.
 pub fn write_phantom(pair: &PhantomPair, dir: &Path) -> Result<(), CliError> {
     std::fs::create_dir_all(dir).map_err(|e| {
@@ -37,6 +37,7 @@ pub fn write_phantom(pair: &PhantomPair, dir: &Path) -> Result<(), CliError> {
         triangles: pair.template_mesh.1.clone(),
     };
     io::write_mesh_ply(&dir.join("template_mesh.ply"), &mesh)?;
+    io::write_mesh_obj(&dir.join("template_mesh.obj"), &mesh)?;
     io::write_ply(
         &dir.join("target.ply"),
         &Cloud {

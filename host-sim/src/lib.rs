@@ -9,4 +9,5 @@ pub mod phantom;
 pub mod plot;
 pub mod prep;
 pub mod register;
+pub mod sample;
 pub mod stats;

@@ -27,6 +27,20 @@ struct Cli {
 enum Command {
     /// Register a CT template cloud onto a US target cloud and map waypoints.
     Register(RegisterJob),
+    /// Poisson-disc sample a surface mesh (PLY, OBJ or STL) into a point cloud (PLY).
+    Sample {
+        /// The mesh.
+        mesh: PathBuf,
+        /// Minimum distance between samples, mm.
+        #[arg(long, default_value_t = 2.5)]
+        spacing: f64,
+        /// Seed of the sampling.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Output point cloud (PLY, binary little-endian).
+        #[arg(short, long)]
+        out: PathBuf,
+    },
     /// Write a phantom pair (CT template, US target, waypoints, ground truth) to a folder.
     Phantom {
         /// Output folder (created if missing).
@@ -113,6 +127,24 @@ fn main() -> ExitCode {
                 o.metrics.hausdorff
             );
         }),
+        Command::Sample {
+            mesh,
+            spacing,
+            seed,
+            out,
+        } => (|| {
+            let m = ribreg_sim::io::read_mesh(&mesh)?;
+            let points = ribreg_sim::sample::poisson_disc(&m, spacing, seed)
+                .map_err(|e| register::CliError::Usage(format!("{}: {e}", mesh.display())))?;
+            let n = points.len();
+            let cloud = ribreg_sim::io::Cloud {
+                points,
+                labels: None,
+            };
+            ribreg_sim::io::write_ply(&out, &cloud, ribreg_sim::io::PlyFormat::BinaryLittleEndian)?;
+            println!("wrote {}: {n} points, spacing {spacing} mm", out.display());
+            Ok(())
+        })(),
         Command::Phantom { out_dir, phantom } => {
             let pair = PhantomPair::generate(&phantom.config());
             demo::write_phantom(&pair, &out_dir).map(|()| {

@@ -94,7 +94,7 @@ mod geometry;
 mod mesh;
 mod params;
 mod pose;
-mod sampling;
+pub(crate) mod sampling;
 
 pub use geometry::{surface_point, SubjectGeometry};
 pub use params::{Material, Part, Side, SubjectParams};

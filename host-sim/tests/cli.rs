@@ -374,3 +374,54 @@ fn paper_method_runs_on_an_unlabelled_template() {
         assert_refused(&o, "", &[&out]);
     }
 }
+
+#[test]
+fn phantom_then_sample_its_mesh() {
+    let dir = tempfile::tempdir().unwrap();
+    let ph = dir.path().join("ph");
+    assert!(ribreg(&["phantom", "--seed", "2", "--out-dir", s(&ph)])
+        .status
+        .success());
+    for f in [
+        "template.ply",
+        "template_mesh.ply",
+        "template_mesh.obj",
+        "target.ply",
+        "waypoints.csv",
+        "true_waypoints.csv",
+        "params.json",
+    ] {
+        assert!(ph.join(f).exists(), "{f}");
+    }
+    let out = dir.path().join("sampled.ply");
+    let o = ribreg(&[
+        "sample",
+        s(&ph.join("template_mesh.obj")),
+        "--spacing",
+        "3",
+        "-o",
+        s(&out),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let cloud = io::read_ply(&out).unwrap();
+    // The same surface as the phantom's own 2.5 mm sample: about (2.5 / 3)² as many points.
+    let direct = io::read_ply(&ph.join("template.ply")).unwrap().points.len() as f64;
+    let ratio = cloud.points.len() as f64 / direct;
+    assert!(
+        (0.55..0.85).contains(&ratio),
+        "{} sampled vs {direct}",
+        cloud.points.len()
+    );
+    let bad = dir.path().join("bad.ply");
+    assert_refused(
+        &ribreg(&[
+            "sample",
+            s(&ph.join("template_mesh.obj")),
+            "--spacing=-1",
+            "-o",
+            s(&bad),
+        ]),
+        "spacing",
+        &[&bad],
+    );
+}

@@ -71,7 +71,7 @@ pub(super) fn surface_candidates(
 
 /// Dart throwing: visit `points` in `order`, accept a point when no accepted point lies
 /// closer than `radius`. Returns the accepted indices in ascending order.
-pub(super) fn dart_throw(points: &[P3], order: &[usize], radius: f64) -> Vec<usize> {
+pub(crate) fn dart_throw(points: &[P3], order: &[usize], radius: f64) -> Vec<usize> {
     if points.is_empty() {
         return Vec::new();
     }
