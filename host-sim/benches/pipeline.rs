@@ -49,14 +49,19 @@ fn benches(c: &mut Criterion) {
             pts
         })
     });
-    for method in [Method::Paper, Method::Improved] {
+    // The paper's method runs unlabelled here: on this phantom its endpoint rule
+    // contradicts the labels (README, "Known limits"), and a refusal is no benchmark.
+    for (method, labels) in [
+        (Method::Paper, None),
+        (Method::Improved, Some(labels.as_slice())),
+    ] {
         c.bench_function(&format!("register_5k_onto_3k_{}", method.name()), |b| {
             b.iter(|| {
                 // Everything `ribreg register` does between reading and writing files:
                 // template preparation, registration, mapping all points, ED/HD.
                 register_clouds(
                     black_box(&template),
-                    Some(&labels),
+                    labels,
                     &target,
                     None,
                     method,
