@@ -61,7 +61,7 @@ const _: () =
     assert!(RIB_SAMPLES[0] + RIB_SAMPLES[1] + RIB_SAMPLES[2] + RIB_SAMPLES[3] == SKELETON_POINTS);
 const _: () = assert!(KEY_POINTS <= crate::mst::MAX_TREE_NODES);
 
-/// The SOM / MST / endpoint stage of one cloud (≈ 5.7 KiB, see the crate docs).
+/// The SOM / MST / endpoint stage of one cloud (6,840 B; see the README's memory table).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SkeletonGraph {
     /// Live SOM 1 nodes (at most 400; see [`Som::live_nodes`]).
