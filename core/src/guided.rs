@@ -96,8 +96,9 @@ pub fn fit_ribs(
     node_labels: &[u8],
     to_fit: &Rigid,
     mut label_of: impl FnMut(usize, &Vec3) -> u8,
+    split: Option<&[f32; 4]>,
     which: Cloud,
-) -> Result<[Vec3; SKELETON_POINTS]> {
+) -> Result<([Vec3; SKELETON_POINTS], [f32; 4])> {
     let step = cloud.len().div_ceil(FIT_SAMPLES).max(1);
     let rib_of = |l: u8| RIBS.iter().position(|&rib| rib == l);
     let mut ext = [(f32::INFINITY, f32::NEG_INFINITY); 4];
@@ -120,8 +121,17 @@ pub fn fit_ribs(
             fz.add(q.x, q.z);
         }
     }
+    // The midline: mean x of the sternum nodes (or the middle of the rib without them).
+    let (mut sx, mut sn) = (0.0f32, 0.0f32);
+    for (p, &l) in nodes.iter().zip(node_labels) {
+        if l == 1 {
+            sx += to_fit.apply(p).x;
+            sn += 1.0;
+        }
+    }
     let back = to_fit.inverse();
     let mut points = [Vec3::zeros(); SKELETON_POINTS];
+    let mut fractions = [0.5f32; 4];
     let mut offset = 0;
     for (r, &rib) in RIBS.iter().enumerate() {
         let found = fits[r].map_or(0, |(fy, _)| fy.count());
@@ -137,12 +147,27 @@ pub fn fit_ribs(
             fz.solve(3).map_err(|_| short)?,
         );
         let (x0, x1) = ext[r];
-        for (k, x) in equal_steps(x0, x1, RIB_SAMPLES[r]).enumerate() {
+        let mid = if sn > 0.0 {
+            (sx / sn).clamp(x0, x1)
+        } else {
+            0.5 * (x0 + x1)
+        };
+        fractions[r] = (mid - x0) / (x1 - x0);
+        // Stations at equal fractions of the rib; with `split` (the template's midline
+        // fractions) each side of the midline scales on its own, so a rib end missing on
+        // one side moves that side's stations only.
+        let fm = split.map_or(fractions[r], |s| s[r]).clamp(1e-3, 1.0 - 1e-3);
+        for (k, f) in equal_steps(0.0, 1.0, RIB_SAMPLES[r]).enumerate() {
+            let x = if f <= fm {
+                x0 + (mid - x0) * f / fm
+            } else {
+                mid + (x1 - mid) * (f - fm) / (1.0 - fm)
+            };
             points[offset + k] = back.apply(&Vec3::new(x, cy.eval(x), cz.eval(x)));
         }
         offset += RIB_SAMPLES[r];
     }
-    Ok(points)
+    Ok((points, fractions))
 }
 
 /// Target skeleton paired with `template_skeleton`, guided by the template's labelled
@@ -153,6 +178,7 @@ pub fn target_skeleton(
     template: &SkeletonGraph,
     template_labels: &[u8],
     template_skeleton: &[Vec3; SKELETON_POINTS],
+    template_split: &[f32; 4],
     neighbours: usize,
 ) -> Result<(Rigid, [Vec3; SKELETON_POINTS])> {
     if template_labels.len() != template.som1.len() {
@@ -181,7 +207,7 @@ pub fn target_skeleton(
             // Note: one label per node, and there are at most SOM1_CAPACITY nodes.
             let _ = labels.push(label);
         }
-        skeleton = fit_ribs(
+        (skeleton, _) = fit_ribs(
             cloud,
             &target.som1,
             &labels,
@@ -190,6 +216,7 @@ pub fn target_skeleton(
                 Some((j, d2)) if d2 <= LABEL_RADIUS_MM * LABEL_RADIUS_MM => labels[j],
                 _ => 0,
             },
+            Some(template_split),
             Cloud::Target,
         )?;
         if round + 1 < GUIDED_ROUNDS {

@@ -77,6 +77,8 @@ pub struct Template {
     pub ends: Option<RibEnds>,
     /// The 30 skeleton points (paths and degrees are empty for the guided model).
     pub skeleton: RibSkeleton,
+    /// Guided model: where the sternum splits each rib, as a fraction of its extent.
+    pub midline_fraction: [f32; 4],
 }
 
 impl Template {
@@ -99,6 +101,7 @@ impl Template {
                     node_labels,
                     ends: Some(ends),
                     skeleton,
+                    midline_fraction: [0.5; 4],
                 })
             }
             RibModel::Guided => {
@@ -108,12 +111,13 @@ impl Template {
                     ));
                 }
                 // Points take their nearest node's label, exactly as the target's will.
-                let points = fit_ribs(
+                let (points, midline_fraction) = fit_ribs(
                     cloud,
                     &graph.som1,
                     &node_labels,
                     &Rigid::identity(),
                     |_, p| nearest(&graph.som1, p).map_or(0, |(j, _)| node_labels[j]),
+                    None,
                     Cloud::Template,
                 )?;
                 let skeleton = RibSkeleton {
@@ -126,6 +130,7 @@ impl Template {
                     node_labels,
                     ends: None,
                     skeleton,
+                    midline_fraction,
                 })
             }
         }
@@ -165,6 +170,7 @@ pub fn register(template: &Template, target: &[Vec3], cfg: &Config) -> Result<Re
                 &template.graph,
                 &template.node_labels,
                 &template.skeleton.points,
+                &template.midline_fraction,
                 cfg.neighbours,
             )?;
             (
