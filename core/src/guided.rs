@@ -22,7 +22,9 @@
 //! 3. every target point takes the label of its nearest node, and each rib's points give
 //!    its curve as in the paper (Eq. 5: cubics `y(x)`, `z(x)` in the template's patient
 //!    frame, where x is lateral), resampled with 6/6/8/10 points between the rib's
-//!    outermost points ([`fit_ribs`]);
+//!    outermost nodes; the stations are split at the sternum (mean x of the sternum
+//!    nodes) in the template's proportion, so each side of a rib stretches on its own
+//!    ([`fit_ribs`]);
 //! 4. steps 2–3 repeat [`GUIDED_ROUNDS`] times, each round's skeleton pairs mapping the
 //!    template nodes more closely onto the target than a rigid pose can, and their
 //!    Kabsch fit giving the next round's fitting frame.
@@ -82,7 +84,11 @@ pub const FIT_SAMPLES: usize = 16_384;
 /// point)`): per rib, least-squares cubics `y(x)`, `z(x)` (paper Eq. 5) through the
 /// rib's points in the fitting frame `to_fit` (x lateral), resampled with 6/6/8/10
 /// points between the rib's outermost labelled SOM nodes, and taken back by the inverse
-/// of `to_fit`.
+/// of `to_fit`. Also returns, per rib, the fraction of its extent at which the sternum
+/// (mean x of the nodes labelled 1) splits it; with `split` (the template's fractions)
+/// the stations on each side of the sternum are spaced over that side alone, so that a
+/// rib end missing on one side of the target moves only that side's stations (measured
+/// on the phantoms: 2.70 → 2.33 mm mean waypoint error).
 ///
 /// Fitting the cloud's own points rather than its SOM nodes makes the curve independent
 /// of where the nodes happen to sit on the cartilage surface (a node sampling the top or
