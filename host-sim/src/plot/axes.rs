@@ -163,6 +163,40 @@ pub(super) fn equal_aspect_limits(
     )
 }
 
+/// Layout of an equal-aspect spatial panel `pw` px wide showing `sets`: its height (the
+/// data's aspect, clamped to `height`), x and y limits, and a tick step aiming at
+/// `ticks` ticks at least `min_px` apart.
+pub(super) struct EqualAspectPanel {
+    pub height: f64,
+    pub xlim: (f64, f64),
+    pub ylim: (f64, f64),
+    pub step: f64,
+}
+
+pub(super) fn equal_aspect_panel<'a>(
+    sets: impl IntoIterator<Item = &'a [[f64; 2]]>,
+    pw: f64,
+    height: (f64, f64),
+    ticks: f64,
+    min_px: f64,
+) -> EqualAspectPanel {
+    let b = bounds(sets);
+    let aspect = b
+        .map(|((x0, x1), (y0, y1))| (y1 - y0) / (x1 - x0))
+        .filter(|a| a.is_finite() && *a > 0.0)
+        .unwrap_or(1.0);
+    let ph = (pw * aspect).clamp(height.0, height.1);
+    let (xlim, ylim) = equal_aspect_limits(b, 0.05, pw, ph);
+    let range = (xlim.1 - xlim.0).max(ylim.1 - ylim.0);
+    let step = choose_step(range, range / (xlim.1 - xlim.0) * pw, ticks, min_px);
+    EqualAspectPanel {
+        height: ph,
+        xlim,
+        ylim,
+        step,
+    }
+}
+
 /// Which decorations an axis gets.
 pub(super) struct AxisStyle<'a> {
     pub xstep: Option<f64>,

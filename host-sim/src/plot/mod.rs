@@ -16,8 +16,8 @@ mod canvas;
 mod tests;
 
 use axes::{
-    bounds, choose_step, equal_aspect_limits, flow_row_count, frame, grid_and_ticks, legend_box,
-    legend_box_width, legend_flow, Axes, AxisStyle, LegendEntry, Swatch,
+    choose_step, equal_aspect_panel, flow_row_count, frame, grid_and_ticks, legend_box,
+    legend_box_width, legend_flow, Axes, AxisStyle, EqualAspectPanel, LegendEntry, Swatch,
 };
 use canvas::{
     fit_text, palette, text_width, Anchor, Marker, Stroke, Svg, Text, CLOUD, FONT_FAMILY, INK,
@@ -602,15 +602,12 @@ fn skeleton_svg(title_text: &str, p: &SkeletonPanels) -> Svg {
     let rib_refs: Vec<&[[f64; 2]]> = p.rib_paths.iter().map(Vec::as_slice).collect();
     let mut sets: Vec<&[[f64; 2]]> = vec![&p.cloud, &p.som1, &p.key_points, &p.skeleton];
     sets.extend(rib_refs.iter().copied());
-    let b = bounds(sets);
-    let aspect = b
-        .map(|((x0, x1), (y0, y1))| (y1 - y0) / (x1 - x0))
-        .filter(|a| a.is_finite() && *a > 0.0)
-        .unwrap_or(1.0);
-    let ph = (pw * aspect).clamp(260.0, 560.0);
-    let (xlim, ylim) = equal_aspect_limits(b, 0.05, pw, ph);
-    let range = (xlim.1 - xlim.0).max(ylim.1 - ylim.0);
-    let step = choose_step(range, range / (xlim.1 - xlim.0) * pw, 6.0, 50.0);
+    let EqualAspectPanel {
+        height: ph,
+        xlim,
+        ylim,
+        step,
+    } = equal_aspect_panel(sets, pw, (260.0, 560.0), 6.0, 50.0);
     let top = 92.0;
 
     // Legends first, to size the canvas.
@@ -878,15 +875,12 @@ fn waypoint_svg(
 
     let mut sets: Vec<&[[f64; 2]]> = vec![cloud, truth];
     sets.extend(methods.iter().map(|m| m.points.as_slice()));
-    let b = bounds(sets);
-    let aspect = b
-        .map(|((x0, x1), (y0, y1))| (y1 - y0) / (x1 - x0))
-        .filter(|a| a.is_finite() && *a > 0.0)
-        .unwrap_or(1.0);
-    let ph = (pw * aspect).clamp(360.0, 640.0);
-    let (xlim, ylim) = equal_aspect_limits(b, 0.05, pw, ph);
-    let range = (xlim.1 - xlim.0).max(ylim.1 - ylim.0);
-    let step = choose_step(range, range / (xlim.1 - xlim.0) * pw, 10.0, 60.0);
+    let EqualAspectPanel {
+        height: ph,
+        xlim,
+        ylim,
+        step,
+    } = equal_aspect_panel(sets, pw, (360.0, 640.0), 10.0, 60.0);
     let h = (top + ph + 66.0).ceil();
 
     let mut svg = Svg::new(WAYPOINT_WIDTH, h as u32);
