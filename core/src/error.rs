@@ -15,6 +15,20 @@ pub enum Cloud {
     Query,
 }
 
+/// Which time-stamped input stream an error is about.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Stream {
+    /// Tracked probe positions of a temporal-calibration sweep.
+    Tracker,
+    /// Landmark rows of a temporal-calibration sweep.
+    Video,
+    /// Robot poses of a scanning sweep.
+    Poses,
+    /// Annotated US frames of a scanning sweep.
+    Frames,
+}
+
 /// Everything that can go wrong in the core. Every variant names what was found and,
 /// where it applies, what was expected.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -109,6 +123,58 @@ pub enum Error {
     },
     /// A configuration value is out of its valid range.
     Config(&'static str),
+    /// A stream has fewer samples than the computation needs.
+    TooFewSamples {
+        /// Which stream.
+        stream: Stream,
+        /// Samples found (for a lag search: the pairs left after the shift).
+        found: u32,
+        /// Minimum needed.
+        min: u32,
+    },
+    /// A sample has a NaN/infinite value or a time stamp not later than the one before.
+    Sample {
+        /// Which stream.
+        stream: Stream,
+        /// Index of the offending sample.
+        index: u32,
+    },
+    /// A calibration sweep moves too little to calibrate: its swing (peak to peak along
+    /// the motion's principal axis, mm, or of the landmark row, pixels) is below the minimum.
+    Swing {
+        /// Which stream is too still.
+        stream: Stream,
+        /// Swing found (mm for the tracker, pixels for the video).
+        found: f32,
+        /// Minimum accepted.
+        min: f32,
+    },
+    /// The best lag correlates the two signals too weakly to be trusted.
+    Correlation {
+        /// |normalised cross-correlation| at the best lag.
+        found: f32,
+        /// Minimum accepted.
+        min: f32,
+    },
+    /// A time is outside the tracked time range: poses are interpolated, never
+    /// extrapolated.
+    OutsideTrack {
+        /// How far outside, ms: negative before the oldest pose kept, positive after the
+        /// newest (0 if no pose has been received).
+        by_ms: f32,
+    },
+    /// Two consecutive tracked poses are too far apart in time to interpolate between.
+    TrackGap {
+        /// The gap, ms.
+        gap_ms: f32,
+        /// Largest gap interpolated over, ms.
+        max_ms: f32,
+    },
+    /// An annotated pixel is outside the image or not finite.
+    Pixel {
+        /// Index of the offending pixel in its frame.
+        index: u32,
+    },
 }
 
 impl fmt::Display for Cloud {
@@ -117,6 +183,17 @@ impl fmt::Display for Cloud {
             Cloud::Template => "template",
             Cloud::Target => "target",
             Cloud::Query => "query",
+        })
+    }
+}
+
+impl fmt::Display for Stream {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Stream::Tracker => "tracker",
+            Stream::Video => "video",
+            Stream::Poses => "pose",
+            Stream::Frames => "frame",
         })
     }
 }
@@ -166,6 +243,42 @@ impl fmt::Display for Error {
             ),
             Error::Capacity { capacity } => write!(f, "buffer full at its capacity of {capacity}"),
             Error::Config(what) => write!(f, "invalid configuration: {what}"),
+            Error::TooFewSamples { stream, found, min } => {
+                write!(f, "{stream} stream has {found} samples, at least {min} are needed")
+            }
+            Error::Sample { stream, index } => write!(
+                f,
+                "{stream} sample {index} is not finite or not later than the sample before it"
+            ),
+            Error::Swing { stream, found, min } => {
+                let unit = if stream == Stream::Video { "px" } else { "mm" };
+                write!(
+                    f,
+                    "the calibration sweep moves too little: {stream} swing {found:.2} {unit}, \
+                     at least {min} {unit} needed (move the probe further up and down)"
+                )
+            }
+            Error::Correlation { found, min } => write!(
+                f,
+                "the landmark track follows the probe motion too weakly at any lag \
+                 (|NCC| {found:.3}, at least {min} needed): is the landmark tracked?"
+            ),
+            Error::OutsideTrack { by_ms } => {
+                if by_ms < 0.0 {
+                    write!(f, "time is {:.1} ms before the oldest tracked pose", -by_ms)
+                } else if by_ms > 0.0 {
+                    write!(f, "time is {by_ms:.1} ms after the newest tracked pose")
+                } else {
+                    f.write_str("no tracked pose yet")
+                }
+            }
+            Error::TrackGap { gap_ms, max_ms } => write!(
+                f,
+                "tracked poses are {gap_ms:.1} ms apart here, at most {max_ms} ms is interpolated"
+            ),
+            Error::Pixel { index } => {
+                write!(f, "pixel {index} of the frame is outside the image or not finite")
+            }
         }
     }
 }

@@ -38,6 +38,7 @@
 //! found and what was expected. Clouds are borrowed, never copied: their size is bounded
 //! only by [`pipeline::MAX_CLOUD_POINTS`].
 
+pub mod compound;
 pub mod endpoints;
 pub mod error;
 pub mod example;
@@ -50,11 +51,14 @@ pub mod local_rigid;
 pub mod metrics;
 pub mod mst;
 pub mod pipeline;
+pub mod probe;
 pub mod rng;
 pub mod skeleton;
 pub mod som;
+pub mod temporal;
+pub mod track;
 
-pub use error::{Error, Result};
+pub use error::{Error, Result, Stream};
 
 /// A point or vector in millimetres.
 pub type Vec3 = nalgebra::Vector3<f32>;

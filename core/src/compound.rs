@@ -1,0 +1,506 @@
+//! Compounding a tracked sweep into a bounded bone-surface cloud (SPEC pipeline step 1).
+//!
+//! Each annotated frame is placed with the flange pose interpolated at its time minus the
+//! temporal-calibration lag ([`crate::track`]), its bone pixels go through the spatial
+//! calibration ([`crate::probe`]) into the robot base frame, and every point lands in a
+//! [`VoxelCloud`]: a fixed-capacity voxel grid that keeps one centroid per occupied voxel.
+//!
+//! # The voxel cloud
+//! Voxels are kept sorted by their Morton (Z-order) code, so a lookup is a binary search
+//! and the cloud needs no hash table. When a point needs a new voxel and the cloud is
+//! full, the grid is coarsened in place: the voxel edge doubles, which shifts every Morton
+//! code right by three bits (keeping the order) and merges the voxels that now share a
+//! code, exactly (sums are re-based on the parent voxel's corner). Coarsening stops at
+//! [`VoxelCloud::max_voxel_mm`]; past it a point needing a new voxel is refused and
+//! counted. Nothing is dropped without a counter: see [`VoxelStats`].
+
+use crate::error::{Cloud, Error, Result, Stream};
+use crate::geom::Rigid;
+use crate::probe::Calibration;
+use crate::track::{PoseTrack, TrackedPose};
+use crate::Vec3;
+
+/// Bits of each axis index in a Morton code: 3 × 21 = 63 bits.
+const AXIS_BITS: u32 = 21;
+/// Offset making axis indices non-negative: the grid spans ±2²⁰ finest voxels.
+const AXIS_OFFSET: i64 = 1 << (AXIS_BITS - 1);
+/// Smallest finest-voxel edge, mm: 2²⁰ × 0.1 mm ≈ 105 m covers every coordinate within
+/// [`crate::MAX_COORD_MM`].
+pub const MIN_VOXEL_MM: f32 = 0.1;
+/// Coarsenings allowed by default: the voxel edge may grow 8× (e.g. 1.5 → 12 mm).
+pub const DEFAULT_MAX_COARSENINGS: u8 = 3;
+/// Voxel capacity of the controller: 2048 × 24 B (code 8 + sum 12 + count 4) = 48 KiB.
+/// The phantom's multi-line sweep fills 1,300–1,600 voxels of 1.5 mm (README).
+pub const VOXEL_CAPACITY: usize = 2048;
+/// Default finest voxel edge, mm: below the registration's SOM-1 spacing (~4 mm between
+/// 400 nodes on a cage), above the pixel size and the annotation noise.
+pub const DEFAULT_VOXEL_MM: f32 = 1.5;
+
+/// What happened to the points offered to a [`VoxelCloud`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct VoxelStats {
+    /// Points accepted (merged into a voxel or starting one).
+    pub accepted: u32,
+    /// Of those, points merged into a voxel that already held points.
+    pub merged: u32,
+    /// Points refused because the cloud was full at its coarsest voxel size.
+    pub refused_full: u32,
+    /// Times the grid was coarsened.
+    pub coarsenings: u8,
+}
+
+/// A fixed-capacity voxel-grid down-sampling of a point stream (module docs).
+pub struct VoxelCloud<const CAP: usize> {
+    /// Morton codes at the current level, ascending.
+    codes: [u64; CAP],
+    /// Per voxel: sum of the points' offsets from the voxel's lowest corner, mm; after
+    /// [`VoxelCloud::finish`], the centroid.
+    sums: [Vec3; CAP],
+    counts: [u32; CAP],
+    len: usize,
+    finest_mm: f32,
+    level: u8,
+    max_level: u8,
+    finished: bool,
+    /// Counters.
+    pub stats: VoxelStats,
+}
+
+impl<const CAP: usize> VoxelCloud<CAP> {
+    /// An empty cloud with finest voxel edge `voxel_mm` (at least [`MIN_VOXEL_MM`]) that
+    /// may coarsen `max_coarsenings` times.
+    pub fn new(voxel_mm: f32, max_coarsenings: u8) -> Result<Self> {
+        if !(MIN_VOXEL_MM..=1000.0).contains(&voxel_mm) {
+            return Err(Error::Config("voxel size must be between 0.1 and 1000 mm"));
+        }
+        if CAP == 0 || max_coarsenings > 16 {
+            return Err(Error::Config(
+                "voxel cloud needs a capacity and at most 16 coarsenings",
+            ));
+        }
+        Ok(VoxelCloud {
+            codes: [0; CAP],
+            sums: [Vec3::new(0.0, 0.0, 0.0); CAP],
+            counts: [0; CAP],
+            len: 0,
+            finest_mm: voxel_mm,
+            level: 0,
+            max_level: max_coarsenings,
+            finished: false,
+            stats: VoxelStats::default(),
+        })
+    }
+
+    /// Occupied voxels.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// No voxel occupied.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Current voxel edge, mm.
+    pub fn voxel_mm(&self) -> f32 {
+        self.finest_mm * (1u32 << self.level) as f32
+    }
+
+    /// Coarsest voxel edge the cloud may reach, mm.
+    pub fn max_voxel_mm(&self) -> f32 {
+        self.finest_mm * (1u32 << self.max_level) as f32
+    }
+
+    /// Adds a point. `Ok(true)` if kept, `Ok(false)` if refused because the cloud is full
+    /// at its coarsest level (counted in [`VoxelStats::refused_full`]). A point that is not
+    /// finite or beyond [`crate::MAX_COORD_MM`] is [`Error::NonFinite`] /
+    /// [`Error::OutOfRange`] (cloud `Target`), and after [`VoxelCloud::finish`] every
+    /// insert is [`Error::Config`]; the cloud is unchanged then.
+    pub fn insert(&mut self, p: &Vec3) -> Result<bool> {
+        if self.finished {
+            return Err(Error::Config("the voxel cloud is finished"));
+        }
+        if !p.iter().all(|v| v.is_finite()) {
+            return Err(Error::NonFinite {
+                cloud: Cloud::Target,
+                index: self.stats.accepted,
+            });
+        }
+        if p.amax() > crate::MAX_COORD_MM {
+            return Err(Error::OutOfRange {
+                cloud: Cloud::Target,
+                index: self.stats.accepted,
+            });
+        }
+        // Finest-level indices, offset to be non-negative (< 2^21 by MIN_VOXEL_MM).
+        let k0 =
+            p.map(|v| libm::floor(f64::from(v) / f64::from(self.finest_mm)) as i64 + AXIS_OFFSET);
+        let finest = morton([k0.x as u64, k0.y as u64, k0.z as u64]);
+        loop {
+            let code = finest >> (3 * u32::from(self.level));
+            let offset = (p.cast::<f64>() - self.corner(code)).cast::<f32>();
+            match self.codes[..self.len].binary_search(&code) {
+                Ok(i) => {
+                    self.sums[i] += offset;
+                    self.counts[i] = self.counts[i].saturating_add(1);
+                    self.stats.merged = self.stats.merged.saturating_add(1);
+                }
+                Err(i) if self.len < CAP => {
+                    self.codes.copy_within(i..self.len, i + 1);
+                    self.sums.copy_within(i..self.len, i + 1);
+                    self.counts.copy_within(i..self.len, i + 1);
+                    self.codes[i] = code;
+                    self.sums[i] = offset;
+                    self.counts[i] = 1;
+                    self.len += 1;
+                }
+                Err(_) if self.level < self.max_level => {
+                    self.coarsen();
+                    continue;
+                }
+                Err(_) => {
+                    self.stats.refused_full = self.stats.refused_full.saturating_add(1);
+                    return Ok(false);
+                }
+            }
+            self.stats.accepted = self.stats.accepted.saturating_add(1);
+            return Ok(true);
+        }
+    }
+
+    /// Lowest corner of voxel `code` at the current level, mm (f64: the grid origin is
+    /// ±2²⁰ voxels away).
+    fn corner(&self, code: u64) -> nalgebra::Vector3<f64> {
+        let k = demorton(code);
+        let edge = f64::from(self.finest_mm) * f64::from(1u32 << self.level);
+        let origin = -(AXIS_OFFSET as f64) * f64::from(self.finest_mm);
+        nalgebra::Vector3::new(k[0] as f64, k[1] as f64, k[2] as f64) * edge
+            + nalgebra::Vector3::repeat(origin)
+    }
+
+    /// Doubles the voxel edge and merges voxels that now share a code.
+    fn coarsen(&mut self) {
+        let child_edge = self.voxel_mm();
+        self.level += 1;
+        self.stats.coarsenings = self.stats.coarsenings.saturating_add(1);
+        let mut w = 0usize;
+        for r in 0..self.len {
+            // The three low bits say in which half of its parent the child lies, per axis.
+            let bits = self.codes[r] & 7;
+            let shift = Vec3::new(
+                (bits & 1) as f32,
+                ((bits >> 1) & 1) as f32,
+                ((bits >> 2) & 1) as f32,
+            ) * child_edge;
+            let code = self.codes[r] >> 3;
+            let sum = self.sums[r] + shift * self.counts[r] as f32;
+            if w > 0 && self.codes[w - 1] == code {
+                self.sums[w - 1] += sum;
+                self.counts[w - 1] = self.counts[w - 1].saturating_add(self.counts[r]);
+            } else {
+                self.codes[w] = code;
+                self.sums[w] = sum;
+                self.counts[w] = self.counts[r];
+                w += 1;
+            }
+        }
+        self.len = w;
+    }
+
+    /// Turns the voxels into their centroids, in place, and returns them (Morton order).
+    /// The cloud accepts no more points afterwards; calling it again returns the same
+    /// slice.
+    pub fn finish(&mut self) -> &[Vec3] {
+        if !self.finished {
+            for i in 0..self.len {
+                let c = self.corner(self.codes[i]);
+                let mean = self.sums[i].cast::<f64>() / f64::from(self.counts[i].max(1));
+                self.sums[i] = (c + mean).cast::<f32>();
+            }
+            self.finished = true;
+        }
+        &self.sums[..self.len]
+    }
+}
+
+/// Interleaves the low 21 bits of x, y, z: bit `i` of x → bit `3i`, y → `3i + 1`,
+/// z → `3i + 2`.
+fn morton(k: [u64; 3]) -> u64 {
+    spread(k[0]) | (spread(k[1]) << 1) | (spread(k[2]) << 2)
+}
+
+/// Inverse of [`morton`].
+fn demorton(code: u64) -> [u64; 3] {
+    [compact(code), compact(code >> 1), compact(code >> 2)]
+}
+
+fn spread(v: u64) -> u64 {
+    let mut x = v & 0x1f_ffff;
+    x = (x | (x << 32)) & 0x001f_0000_0000_ffff;
+    x = (x | (x << 16)) & 0x001f_0000_ff00_00ff;
+    x = (x | (x << 8)) & 0x100f_00f0_0f00_f00f;
+    x = (x | (x << 4)) & 0x10c3_0c30_c30c_30c3;
+    (x | (x << 2)) & 0x1249_2492_4924_9249
+}
+
+fn compact(v: u64) -> u64 {
+    let mut x = v & 0x1249_2492_4924_9249;
+    x = (x | (x >> 2)) & 0x10c3_0c30_c30c_30c3;
+    x = (x | (x >> 4)) & 0x100f_00f0_0f00_f00f;
+    x = (x | (x >> 8)) & 0x001f_0000_ff00_00ff;
+    x = (x | (x >> 16)) & 0x001f_0000_0000_ffff;
+    (x | (x >> 32)) & 0x1f_ffff
+}
+
+/// Frames placed and refused by a [`Compounder`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FrameStats {
+    /// Frames whose pixels went into the cloud.
+    pub placed: u32,
+    /// Frames refused because their lag-corrected time is outside the tracked range (or
+    /// across a gap in it).
+    pub outside_track: u32,
+    /// Frames refused for a bad pixel or time stamp.
+    pub invalid: u32,
+}
+
+/// A sweep being compounded: calibration and lag, the pose window and the cloud.
+pub struct Compounder<const POSES: usize, const VOXELS: usize> {
+    calibration: Calibration,
+    ee_t_us: Rigid,
+    lag_s: f64,
+    /// The tracked flange poses.
+    pub track: PoseTrack<POSES>,
+    /// The bone-surface cloud, robot base frame.
+    pub cloud: VoxelCloud<VOXELS>,
+    /// Frame counters.
+    pub frames: FrameStats,
+}
+
+impl<const POSES: usize, const VOXELS: usize> Compounder<POSES, VOXELS> {
+    /// A compounder for `calibration` (validated) and a lag (s, positive when the video
+    /// lags the tracker, within ±10 s), into voxels of `voxel_mm` (see [`VoxelCloud::new`]).
+    pub fn new(
+        calibration: Calibration,
+        lag_s: f64,
+        voxel_mm: f32,
+        max_coarsenings: u8,
+    ) -> Result<Self> {
+        calibration.validate()?;
+        if !(lag_s.is_finite() && libm::fabs(lag_s) <= 10.0) {
+            return Err(Error::Config("lag must be finite and within ±10 s"));
+        }
+        Ok(Compounder {
+            calibration,
+            ee_t_us: calibration.ee_t_us(),
+            lag_s,
+            track: PoseTrack::new(),
+            cloud: VoxelCloud::new(voxel_mm, max_coarsenings)?,
+            frames: FrameStats::default(),
+        })
+    }
+
+    /// The lag in use, s.
+    pub fn lag_s(&self) -> f64 {
+        self.lag_s
+    }
+
+    /// Adds a tracked flange pose (see [`PoseTrack::push`]).
+    pub fn add_pose(&mut self, pose: TrackedPose) -> Result<()> {
+        self.track.push(pose)
+    }
+
+    /// Adds a frame stamped `t` (video clock) with its bone pixels `(u, v)`. Returns the
+    /// points kept. The frame is all or nothing: a pixel outside the image or not finite
+    /// is [`Error::Pixel`], a time outside the tracked range [`Error::OutsideTrack`] or
+    /// [`Error::TrackGap`]; nothing of that frame is added and [`Compounder::frames`]
+    /// counts it.
+    pub fn add_frame(&mut self, t: f64, pixels: &[[f32; 2]]) -> Result<u32> {
+        let probe = self.calibration.probe;
+        if let Some(i) = pixels
+            .iter()
+            .position(|p| probe.pixel_to_image(p[0], p[1]).is_none())
+        {
+            self.frames.invalid = self.frames.invalid.saturating_add(1);
+            return Err(Error::Pixel { index: i as u32 });
+        }
+        if !t.is_finite() {
+            self.frames.invalid = self.frames.invalid.saturating_add(1);
+            return Err(Error::Sample {
+                stream: Stream::Frames,
+                index: self.frames.placed,
+            });
+        }
+        let b_t_ee = match self.track.at(t - self.lag_s) {
+            Ok(pose) => pose,
+            Err(e) => {
+                self.frames.outside_track = self.frames.outside_track.saturating_add(1);
+                return Err(e);
+            }
+        };
+        let b_t_us = b_t_ee.after(&self.ee_t_us);
+        let mut kept = 0u32;
+        for p in pixels {
+            // Note(unwrap): every pixel was checked above.
+            let q = b_t_us.apply(&probe.pixel_to_image(p[0], p[1]).unwrap());
+            // A pose within MAX_COORD_MM and a probe within 1 m keep q finite and in
+            // range, so only a full cloud refuses a point here.
+            if self.cloud.insert(&q)? {
+                kept += 1;
+            }
+        }
+        self.frames.placed = self.frames.placed.saturating_add(1);
+        Ok(kept)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::probe::ProbeModel;
+    use nalgebra::Matrix3;
+
+    #[test]
+    fn morton_round_trip() {
+        for k in [
+            [0, 0, 0],
+            [1, 2, 3],
+            [0x1f_ffff, 0, 0x15_5555],
+            [12345, 999_999, 2_000_000],
+        ] {
+            assert_eq!(demorton(morton(k)), k);
+        }
+        // Halving every index is a 3-bit shift.
+        let k = [1234u64, 777, 99];
+        assert_eq!(morton(k) >> 3, morton([617, 388, 49]));
+    }
+
+    #[test]
+    fn merges_points_of_a_voxel_into_their_centroid() {
+        let mut c = VoxelCloud::<16>::new(2.0, 0).unwrap();
+        for p in [
+            [0.2, 0.2, 0.2],
+            [1.8, 1.0, 0.4],
+            [-0.5, 0.0, 0.0],
+            [10.1, -3.9, 5.0],
+        ] {
+            assert_eq!(c.insert(&Vec3::new(p[0], p[1], p[2])), Ok(true));
+        }
+        assert_eq!(c.len(), 3);
+        assert_eq!(c.stats.merged, 1);
+        let pts = c.finish();
+        assert!(pts
+            .iter()
+            .any(|p| (p - Vec3::new(1.0, 0.6, 0.3)).norm() < 1e-5));
+        assert!(pts
+            .iter()
+            .any(|p| (p - Vec3::new(-0.5, 0.0, 0.0)).norm() < 1e-5));
+        assert!(pts
+            .iter()
+            .any(|p| (p - Vec3::new(10.1, -3.9, 5.0)).norm() < 1e-5));
+        assert!(matches!(c.insert(&Vec3::zeros()), Err(Error::Config(_))));
+    }
+
+    /// A full cloud coarsens exactly: the result equals a cloud built at the coarse size.
+    #[test]
+    fn coarsening_equals_building_coarse() {
+        let mut rng = crate::rng::Rng::new(5);
+        let pts: std::vec::Vec<Vec3> = (0..3000)
+            .map(|_| {
+                Vec3::new(
+                    rng.next_f32() * 60.0 - 30.0,
+                    rng.next_f32() * 20.0 + 100.0,
+                    rng.next_f32() * 3.0,
+                )
+            })
+            .collect();
+        let mut small = VoxelCloud::<64>::new(1.0, 4).unwrap();
+        for p in &pts {
+            assert_eq!(small.insert(p), Ok(true));
+        }
+        assert!(small.stats.coarsenings >= 1);
+        let edge = small.voxel_mm();
+        let mut direct = VoxelCloud::<64>::new(edge, 0).unwrap();
+        for p in &pts {
+            assert_eq!(direct.insert(p), Ok(true));
+        }
+        let (a, b) = (small.finish(), direct.finish());
+        assert_eq!(a.len(), b.len());
+        for (p, q) in a.iter().zip(b) {
+            assert!((p - q).norm() < 1e-3, "{p} vs {q}");
+        }
+        // At its coarsest level a full cloud refuses and counts.
+        let mut tiny = VoxelCloud::<4>::new(1.0, 0).unwrap();
+        for p in pts.iter().take(100) {
+            tiny.insert(p).unwrap();
+        }
+        assert_eq!(tiny.len(), 4);
+        assert_eq!(tiny.stats.accepted + tiny.stats.refused_full, 100);
+        assert!(tiny.stats.refused_full > 0);
+    }
+
+    #[test]
+    fn bad_points_are_refused_unchanged() {
+        let mut c = VoxelCloud::<8>::new(1.0, 0).unwrap();
+        assert!(matches!(
+            c.insert(&Vec3::new(f32::NAN, 0.0, 0.0)),
+            Err(Error::NonFinite { .. })
+        ));
+        assert!(matches!(
+            c.insert(&Vec3::new(2e5, 0.0, 0.0)),
+            Err(Error::OutOfRange { .. })
+        ));
+        assert!(c.is_empty());
+        assert!(VoxelCloud::<8>::new(0.01, 0).is_err());
+        assert!(VoxelCloud::<8>::new(f32::NAN, 0).is_err());
+    }
+
+    /// A probe held still above a flat plate: every frame lands on the same line, placed
+    /// with the interpolated pose; frames outside the track are refused and counted.
+    #[test]
+    fn compounds_frames_with_lag_corrected_poses() {
+        let cal = Calibration::centred(ProbeModel::LINEAR_38MM, Rigid::identity());
+        let mut c = Compounder::<16, 256>::new(cal, 0.25, 1.0, 0).unwrap();
+        // The flange moves along base y at 100 mm/s, beam along base z.
+        for i in 0..10 {
+            let t = f64::from(i) * 0.01;
+            let pose = Rigid {
+                rotation: Matrix3::identity(),
+                translation: Vec3::new(0.0, 100.0 * t as f32, 0.0),
+            };
+            c.add_pose(TrackedPose::from_rigid(t, &pose)).unwrap();
+        }
+        // Frame stamped 0.295 s shows the pose at 0.045 s: y = 4.5 mm; row 200 = 20 mm deep.
+        let kept = c.add_frame(0.295, &[[192.0, 200.0], [0.0, 200.0]]).unwrap();
+        assert_eq!(kept, 2);
+        assert!(matches!(
+            c.add_frame(0.2, &[[1.0, 1.0]]),
+            Err(Error::OutsideTrack { .. })
+        ));
+        assert!(matches!(
+            c.add_frame(0.3, &[[1.0, 1e4]]),
+            Err(Error::Pixel { index: 0 })
+        ));
+        assert_eq!(
+            c.frames,
+            FrameStats {
+                placed: 1,
+                outside_track: 1,
+                invalid: 1
+            }
+        );
+        let pts = c.cloud.finish();
+        assert!(
+            pts.iter()
+                .any(|p| (p - Vec3::new(0.0, 4.5, 20.0)).norm() < 1e-4),
+            "{pts:?}"
+        );
+        assert!(
+            pts.iter()
+                .any(|p| (p - Vec3::new(-19.2, 4.5, 20.0)).norm() < 1e-4),
+            "{pts:?}"
+        );
+    }
+}
