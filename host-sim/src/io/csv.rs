@@ -1,42 +1,106 @@
-//! Point lists as CSV: header `x,y,z`, then one point per line, mm.
+//! Tables of numbers as CSV: one exact header line, then one row of finite numbers per
+//! line. Point lists (header `x,y,z`, mm) are the common case; sweep logs
+//! (`t,x,y,z,qw,qx,qy,qz`, `frame,t,u,v`, `t,row`) use the same reader and writer.
 
 use std::path::Path;
 
-use super::{check_points, content_lines, excerpt, parse_point, read_bytes, text, write_atomic};
+use super::{check_points, content_lines, excerpt, parse_numbers, read_bytes, text, write_atomic};
 use super::{FormatError, IoError, Location};
 
-/// Parse a CSV point list.
+/// Parse a CSV table whose header is exactly `columns`, each row `N` finite numbers.
 ///
-/// The first non-blank line must be the header `x,y,z` (whitespace around the
-/// fields and CRLF endings tolerated, as is a leading UTF-8 byte-order mark).
-/// Every further non-blank line must hold exactly three comma-separated finite
-/// numbers. A header with no points gives an empty list; whether that is
-/// acceptable is the caller's decision.
+/// The first non-blank line must be the header (whitespace around the fields and CRLF
+/// endings tolerated, as is a leading UTF-8 byte-order mark). A header with no rows gives
+/// an empty table; whether that is acceptable is the caller's decision.
 ///
 /// # Errors
 ///
-/// [`IoError::Format`] (without a path) naming the line (counted from 1): a
-/// missing or different header, a line without exactly three values, a value
-/// that is not a number, a non-finite value.
-pub fn parse_points_csv(text: &str) -> Result<Vec<[f64; 3]>, IoError> {
+/// [`IoError::Format`] (without a path) naming the line (counted from 1): a missing or
+/// different header, a row without exactly `N` values, a value that is not a number, a
+/// non-finite value.
+pub fn parse_table_csv<const N: usize>(
+    text: &str,
+    columns: [&str; N],
+) -> Result<Vec<[f64; N]>, IoError> {
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut lines = content_lines(text, 1);
+    let header_error = |found: &str| FormatError::CsvHeader {
+        expected: columns.join(","),
+        found: excerpt(found),
+    };
     match lines.next() {
-        Some((_, header)) if header.split(',').map(str::trim).eq(["x", "y", "z"]) => {}
+        Some((_, header)) if header.split(',').map(str::trim).eq(columns) => {}
         Some((n, found)) => {
             return Err(IoError::format(
-                FormatError::CsvHeader(excerpt(found)),
+                header_error(found),
                 Some(Location::Line(n)),
             ))
         }
-        None => return Err(FormatError::CsvHeader(String::new()).into()),
+        None => return Err(header_error("").into()),
     }
     lines
         .map(|(n, line)| {
             let fields: Vec<&str> = line.split(',').map(str::trim).collect();
-            parse_point(&fields).map_err(|kind| IoError::format(kind, Some(Location::Line(n))))
+            parse_numbers(&fields).map_err(|kind| IoError::format(kind, Some(Location::Line(n))))
         })
         .collect()
+}
+
+/// Read a CSV table from `path`; see [`parse_table_csv`].
+///
+/// # Errors
+///
+/// [`IoError::Io`] if the file cannot be read; [`IoError::Format`] with the path
+/// attached if it is not UTF-8 or [`parse_table_csv`] rejects it.
+pub fn read_table_csv<const N: usize>(
+    path: &Path,
+    columns: [&str; N],
+) -> Result<Vec<[f64; N]>, IoError> {
+    let bytes = read_bytes(path)?;
+    text(&bytes, 1)
+        .and_then(|t| parse_table_csv(t, columns))
+        .map_err(|e| e.with_path(path))
+}
+
+/// Write `rows` under the header `columns` (shortest round-trip number formatting),
+/// atomically.
+///
+/// # Errors
+///
+/// With `path` left untouched: [`IoError::Format`] for a non-finite value (naming the
+/// row); [`IoError::Io`] if the file cannot be written.
+pub fn write_table_csv<const N: usize>(
+    path: &Path,
+    columns: [&str; N],
+    rows: &[[f64; N]],
+) -> Result<(), IoError> {
+    if let Some(i) = rows.iter().position(|r| !r.iter().all(|v| v.is_finite())) {
+        return Err(
+            IoError::format(FormatError::NotFinite, Some(Location::item("row", i))).with_path(path),
+        );
+    }
+    write_atomic(path, |out| {
+        writeln!(out, "{}", columns.join(","))?;
+        for r in rows {
+            for (i, v) in r.iter().enumerate() {
+                if i > 0 {
+                    out.write_all(b",")?;
+                }
+                write!(out, "{v}")?;
+            }
+            out.write_all(b"\n")?;
+        }
+        Ok(())
+    })
+}
+
+/// Parse a CSV point list: a table with header `x,y,z`; see [`parse_table_csv`].
+///
+/// # Errors
+///
+/// As [`parse_table_csv`].
+pub fn parse_points_csv(text: &str) -> Result<Vec<[f64; 3]>, IoError> {
+    parse_table_csv(text, ["x", "y", "z"])
 }
 
 /// Read a CSV point list from `path`; see [`parse_points_csv`].
@@ -46,10 +110,7 @@ pub fn parse_points_csv(text: &str) -> Result<Vec<[f64; 3]>, IoError> {
 /// [`IoError::Io`] if the file cannot be read; [`IoError::Format`] with the path
 /// attached if it is not UTF-8 or [`parse_points_csv`] rejects it.
 pub fn read_points_csv(path: &Path) -> Result<Vec<[f64; 3]>, IoError> {
-    let bytes = read_bytes(path)?;
-    text(&bytes, 1)
-        .and_then(parse_points_csv)
-        .map_err(|e| e.with_path(path))
+    read_table_csv(path, ["x", "y", "z"])
 }
 
 /// Write `points` to `path` as CSV (`x,y,z` header, shortest round-trip number
@@ -63,13 +124,7 @@ pub fn write_points_csv(path: &Path, points: &[[f64; 3]]) -> Result<(), IoError>
     if !points.is_empty() {
         check_points(points, "point").map_err(|e| e.with_path(path))?;
     }
-    write_atomic(path, |out| {
-        writeln!(out, "x,y,z")?;
-        for p in points {
-            writeln!(out, "{},{},{}", p[0], p[1], p[2])?;
-        }
-        Ok(())
-    })
+    write_table_csv(path, ["x", "y", "z"], points)
 }
 
 #[cfg(test)]

@@ -23,7 +23,10 @@ mod csv;
 mod mesh;
 mod ply;
 
-pub use csv::{parse_points_csv, read_points_csv, write_points_csv};
+pub use csv::{
+    parse_points_csv, parse_table_csv, read_points_csv, read_table_csv, write_points_csv,
+    write_table_csv,
+};
 pub use mesh::{read_mesh, write_mesh_obj};
 pub use ply::{parse_ply, read_ply, write_mesh_ply, write_ply};
 
@@ -173,7 +176,12 @@ pub enum FormatError {
     NotUtf8,
     /// A CSV file does not start with the header `x,y,z`; holds the line found
     /// (empty at end of file).
-    CsvHeader(String),
+    CsvHeader {
+        /// The header expected, e.g. `x,y,z`.
+        expected: String,
+        /// What the first line held (empty at end of file).
+        found: String,
+    },
     /// A structural error in an OBJ or ASCII STL file; the text says what was expected.
     Syntax(String),
     /// Neither a binary STL of the right size nor an ASCII STL.
@@ -257,10 +265,12 @@ impl fmt::Display for FormatError {
             E::TooManyVertices(n) => write!(f, "{n} vertices are more than can be indexed"),
             E::TrailingData => write!(f, "unexpected data after the last element"),
             E::NotUtf8 => write!(f, "text is not valid UTF-8"),
-            E::CsvHeader(found) if found.is_empty() => {
-                write!(f, "expected header \"x,y,z\", found end of file")
+            E::CsvHeader { expected, found } if found.is_empty() => {
+                write!(f, "expected header \"{expected}\", found end of file")
             }
-            E::CsvHeader(found) => write!(f, "expected header \"x,y,z\", found \"{found}\""),
+            E::CsvHeader { expected, found } => {
+                write!(f, "expected header \"{expected}\", found \"{found}\"")
+            }
             E::Syntax(s) => write!(f, "{s}"),
             E::NotStl { len, declared } => {
                 write!(f, "not an STL file: neither binary (")?;
@@ -440,19 +450,24 @@ fn parse_coordinate(token: &str) -> Result<f64, FormatError> {
     }
 }
 
+/// Parse exactly `N` tokens of a text format into finite numbers.
+fn parse_numbers<const N: usize>(tokens: &[&str]) -> Result<[f64; N], FormatError> {
+    if tokens.len() != N {
+        return Err(FormatError::TokenCount {
+            expected: N,
+            found: tokens.len(),
+        });
+    }
+    let mut out = [0.0; N];
+    for (o, t) in out.iter_mut().zip(tokens) {
+        *o = parse_coordinate(t)?;
+    }
+    Ok(out)
+}
+
 /// Parse exactly three coordinate tokens of a text format into a finite point.
 fn parse_point(tokens: &[&str]) -> Result<[f64; 3], FormatError> {
-    match tokens {
-        [x, y, z] => Ok([
-            parse_coordinate(x)?,
-            parse_coordinate(y)?,
-            parse_coordinate(z)?,
-        ]),
-        _ => Err(FormatError::TokenCount {
-            expected: 3,
-            found: tokens.len(),
-        }),
-    }
+    parse_numbers(tokens)
 }
 
 /// Fan-triangulate a polygon `corners` (`[a, b, c, d]` gives `abc`, `acd`) onto `out`.
