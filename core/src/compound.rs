@@ -34,7 +34,7 @@ pub const DEFAULT_MAX_COARSENINGS: u8 = 3;
 pub const VOXEL_CAPACITY: usize = 2048;
 /// Default finest voxel edge, mm: below the registration's SOM-1 spacing (~4 mm between
 /// 400 nodes on a cage), above the pixel size and the annotation noise.
-pub const DEFAULT_VOXEL_MM: f32 = 1.5;
+pub const DEFAULT_VOXEL_MM: f32 = 2.0;
 
 /// What happened to the points offered to a [`VoxelCloud`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

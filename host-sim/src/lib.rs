@@ -11,3 +11,4 @@ pub mod prep;
 pub mod register;
 pub mod sample;
 pub mod stats;
+pub mod sweep;

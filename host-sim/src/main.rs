@@ -4,7 +4,8 @@ use clap::{Parser, Subcommand};
 use ribreg_sim::demo;
 use ribreg_sim::eval::{self, EvalConfig, EvalMethod};
 use ribreg_sim::phantom::{PhantomConfig, PhantomPair, Variant};
-use ribreg_sim::register::{self, Method, RegisterJob};
+use ribreg_sim::register::{self, CliError, Method, RegisterJob};
+use ribreg_sim::sweep::{self, SweepConfig};
 use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -41,13 +42,51 @@ enum Command {
         #[arg(short, long)]
         out: PathBuf,
     },
-    /// Write a phantom pair (CT template, US target, waypoints, ground truth) to a folder.
+    /// Write a phantom pair (CT template, US target, waypoints, ground truth) to a folder,
+    /// or (`phantom sweep`) the logs of a simulated robotic sweep over it.
+    #[command(args_conflicts_with_subcommands = true)]
     Phantom {
         /// Output folder (created if missing).
         #[arg(long, default_value = "out/phantom")]
         out_dir: PathBuf,
         #[command(flatten)]
         phantom: PhantomArgs,
+        #[command(subcommand)]
+        sweep: Option<PhantomCommand>,
+    },
+    /// Calibrate the robotic US system.
+    Calibrate {
+        #[command(subcommand)]
+        kind: CalibrateCommand,
+    },
+    /// Compound a tracked sweep (poses + annotated frames) into a US cloud (PLY).
+    Compound {
+        /// Flange poses: CSV `t,x,y,z,qw,qx,qy,qz` (s, mm, unit quaternion), ~100 Hz.
+        #[arg(long)]
+        poses: PathBuf,
+        /// Bone pixels: CSV `frame,t,u,v` (frame number, video time s, column, row).
+        #[arg(long)]
+        frames: PathBuf,
+        /// Spatial calibration (JSON: probe, tcp_T_us, ee_T_tcp; see the README).
+        #[arg(long)]
+        probe: PathBuf,
+        /// Video lag behind the tracker, ms.
+        #[arg(
+            long,
+            required_unless_present = "lag_file",
+            conflicts_with = "lag_file",
+            allow_negative_numbers = true
+        )]
+        lag_ms: Option<f64>,
+        /// The lag as written by `ribreg calibrate temporal --json`.
+        #[arg(long)]
+        lag_file: Option<PathBuf>,
+        /// Finest voxel edge of the down-sampling, mm (the grid coarsens if it fills up).
+        #[arg(long, default_value_t = ribreg_core::compound::DEFAULT_VOXEL_MM)]
+        voxel_mm: f32,
+        /// Output cloud (PLY, binary little-endian), robot base frame.
+        #[arg(short, long)]
+        out: PathBuf,
     },
     /// Build the default phantom pair, register it and compare with the ground truth.
     Demo {
@@ -59,6 +98,10 @@ enum Command {
         /// `paper`: as published; `improved`: guided ribs + anterior template.
         #[arg(long, value_enum, default_value_t = Method::Improved)]
         method: Method,
+        /// Instead: simulate a robotic sweep, calibrate its lag, compound it and register
+        /// onto the compounded and onto the ideal US cloud (writes to OUT_DIR/sweep).
+        #[arg(long)]
+        sweep: bool,
     },
     /// Run ours (paper and improved) and the baselines on phantom pairs; write tables and figures.
     Eval {
@@ -78,6 +121,69 @@ enum Command {
         #[arg(long, default_value = "out/eval")]
         out_dir: PathBuf,
     },
+}
+
+#[derive(Subcommand)]
+enum PhantomCommand {
+    /// Simulate a multi-line robotic sweep over the phantom: probe calibration, pose and
+    /// frame logs, a temporal-calibration sweep, plus the phantom files.
+    Sweep {
+        /// Output folder (created if missing).
+        #[arg(long, default_value = "out/sweep")]
+        out_dir: PathBuf,
+        #[command(flatten)]
+        phantom: PhantomArgs,
+        #[command(flatten)]
+        sweep: SweepArgs,
+    },
+}
+
+#[derive(Subcommand)]
+enum CalibrateCommand {
+    /// Lag between the US video and the robot tracking from a calibration sweep.
+    Temporal {
+        /// CSV `t,x,y,z`: TCP positions (s, mm, base frame), ~100 Hz.
+        #[arg(long)]
+        tracker: PathBuf,
+        /// CSV `t,row`: the landmark's row (s, pixels) per frame, ~30 fps.
+        #[arg(long)]
+        video: PathBuf,
+        /// Print `{"lag_ms": .., "rmse": .., "pairs": ..}` instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+#[derive(clap::Args)]
+struct SweepArgs {
+    /// Video lag behind the tracker, ms.
+    #[arg(long, default_value_t = 268.0, allow_negative_numbers = true)]
+    lag_ms: f64,
+    /// Probe speed, mm/s.
+    #[arg(long, default_value_t = 20.0)]
+    speed_mm_s: f64,
+    /// Distance between scan lines, mm.
+    #[arg(long, default_value_t = 10.0)]
+    line_spacing_mm: f64,
+    /// Annotation noise of the bone rows (SD), pixels.
+    #[arg(long, default_value_t = 2.0)]
+    pixel_noise_px: f64,
+    /// Fraction of frames lost.
+    #[arg(long, default_value_t = 0.05)]
+    miss_rate: f64,
+}
+
+impl SweepArgs {
+    fn config(&self) -> SweepConfig {
+        SweepConfig {
+            lag_ms: self.lag_ms,
+            speed_mm_s: self.speed_mm_s,
+            line_spacing_mm: self.line_spacing_mm,
+            pixel_noise_px: self.pixel_noise_px,
+            frame_miss_rate: self.miss_rate,
+            ..SweepConfig::default()
+        }
+    }
 }
 
 /// Which pose variants `eval` runs.
@@ -106,6 +212,74 @@ impl PhantomArgs {
             ..PhantomConfig::default()
         }
     }
+}
+
+/// `lag_ms` from the JSON `ribreg calibrate temporal --json` prints.
+fn read_lag_ms(path: &std::path::Path) -> Result<f64, CliError> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| CliError::Usage(format!("{}: cannot read: {e}", path.display())))?;
+    let v: serde_json::Value = serde_json::from_str(&text)
+        .map_err(|e| CliError::Usage(format!("{}: {e}", path.display())))?;
+    v["lag_ms"]
+        .as_f64()
+        .filter(|v| v.is_finite())
+        .ok_or_else(|| CliError::Usage(format!("{}: no number \"lag_ms\"", path.display())))
+}
+
+fn run_phantom_sweep(
+    phantom: &PhantomConfig,
+    cfg: &SweepConfig,
+    out_dir: &std::path::Path,
+    progress: &mut dyn FnMut(&str),
+) -> Result<(), CliError> {
+    progress("simulating the sweep");
+    let logs = sweep::simulate(phantom, cfg)?;
+    logs.write(out_dir)?;
+    let s = &logs.summary["scan"];
+    println!(
+        "wrote {}: {} scan lines in {:.0} s, {} poses, {} of {} frames with {} bone pixels; \
+         calibration sweep {} poses / {} frames; lag {} ms",
+        out_dir.display(),
+        s["lines"],
+        s["duration_s"].as_f64().unwrap_or(f64::NAN),
+        s["poses"],
+        s["frames_logged"],
+        s["frames_captured"],
+        s["pixels"],
+        logs.calib_tracker.len(),
+        logs.calib_video.len(),
+        cfg.lag_ms
+    );
+    Ok(())
+}
+
+fn run_sweep_demo(
+    phantom: &PhantomConfig,
+    out_dir: &std::path::Path,
+    progress: &mut dyn FnMut(&str),
+) -> Result<(), CliError> {
+    let cfg = SweepConfig::default();
+    run_phantom_sweep(phantom, &cfg, out_dir, progress)?;
+    let r = sweep::end_to_end(out_dir, ribreg_core::compound::DEFAULT_VOXEL_MM, progress)?;
+    let json = r.json(cfg.lag_ms);
+    let text = serde_json::to_string_pretty(&json).map_err(|e| CliError::Usage(e.to_string()))?;
+    ribreg_sim::io::write_text(&out_dir.join("end_to_end.json"), &text)?;
+    println!(
+        "sweep demo: lag {:.1} ms (true {:.0}); compounded {} points; waypoint error {:.2} ± {:.2} mm \
+         (max {:.2}) vs {:.2} ± {:.2} mm (max {:.2}) on the ideal cloud: difference {:+.2} mm; outputs in {}",
+        r.lag.lag_s * 1e3,
+        cfg.lag_ms,
+        r.compound.points.len(),
+        r.sweep_waypoints.0,
+        r.sweep_waypoints.1,
+        r.sweep_waypoints.2,
+        r.ideal_waypoints.0,
+        r.ideal_waypoints.1,
+        r.ideal_waypoints.2,
+        r.sweep_waypoints.0 - r.ideal_waypoints.0,
+        out_dir.display()
+    );
+    Ok(())
 }
 
 fn main() -> ExitCode {
@@ -145,7 +319,75 @@ fn main() -> ExitCode {
             println!("wrote {}: {n} points, spacing {spacing} mm", out.display());
             Ok(())
         })(),
-        Command::Phantom { out_dir, phantom } => {
+        Command::Phantom {
+            sweep: Some(PhantomCommand::Sweep {
+                out_dir,
+                phantom,
+                sweep,
+            }),
+            ..
+        } => run_phantom_sweep(&phantom.config(), &sweep.config(), &out_dir, &mut progress),
+        Command::Calibrate {
+            kind:
+                CalibrateCommand::Temporal {
+                    tracker,
+                    video,
+                    json,
+                },
+        } => sweep::calibrate_temporal(&tracker, &video).map(|est| {
+            let lag_ms = est.lag_s * 1e3;
+            if json {
+                println!(
+                    "{}",
+                    serde_json::json!({ "lag_ms": lag_ms, "rmse": est.rmse_px, "pairs": est.pairs })
+                );
+            } else {
+                println!(
+                    "lag {lag_ms:.1} ms (positive: the video lags the tracker); residual RMSE {:.2} px \
+                     over {} frame/position pairs; NCC {:.4}; swing {:.1} mm / {:.0} px",
+                    est.rmse_px, est.pairs, est.ncc, est.swing_mm, est.swing_px
+                );
+            }
+        }),
+        Command::Compound {
+            poses,
+            frames,
+            probe,
+            lag_ms,
+            lag_file,
+            voxel_mm,
+            out,
+        } => (|| {
+            let lag_ms = match (lag_ms, lag_file) {
+                (Some(ms), _) => ms,
+                (None, Some(path)) => read_lag_ms(&path)?,
+                (None, None) => return Err(CliError::Usage("give --lag-ms or --lag-file".into())),
+            };
+            let cal = sweep::ProbeFile::read(&probe)?;
+            let poses = sweep::read_poses(&poses)?;
+            let frames = sweep::read_frames(&frames)?;
+            progress(&format!("{} poses, {} pixel rows; lag {lag_ms} ms", poses.len(), frames.len()));
+            let o = sweep::compound(&cal, lag_ms * 1e-3, voxel_mm, &poses, &frames)?;
+            sweep::write_cloud(&out, &o.points)?;
+            println!(
+                "wrote {}: {} points ({} mm voxels); frames placed {}, refused {} outside the tracked \
+                 range, {} invalid; points accepted {} (merged {}), refused {} (cloud full); poses refused {}",
+                out.display(),
+                o.points.len(),
+                o.voxel_mm,
+                o.frames.placed,
+                o.frames.outside_track,
+                o.frames.invalid,
+                o.voxels.accepted,
+                o.voxels.merged,
+                o.voxels.refused_full,
+                o.poses_refused
+            );
+            Ok(())
+        })(),
+        Command::Phantom {
+            out_dir, phantom, ..
+        } => {
             let pair = PhantomPair::generate(&phantom.config());
             demo::write_phantom(&pair, &out_dir).map(|()| {
                 println!(
@@ -159,7 +401,14 @@ fn main() -> ExitCode {
         Command::Demo {
             out_dir,
             phantom,
+            sweep: true,
+            ..
+        } => run_sweep_demo(&phantom.config(), &out_dir.join("sweep"), &mut progress),
+        Command::Demo {
+            out_dir,
+            phantom,
             method,
+            ..
         } => demo::run_demo(&phantom.config(), method, &out_dir, &mut progress).map(|r| {
             let g = &r["ground_truth"];
             println!(

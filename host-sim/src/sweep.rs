@@ -1,0 +1,730 @@
+//! Robotic US sweeps: simulated logs (`ribreg phantom sweep`), temporal calibration
+//! (`ribreg calibrate temporal`) and compounding the logs into a US cloud
+//! (`ribreg compound`) with the same core code the controller runs.
+//!
+//! # Files
+//! * `probe.json` — the spatial calibration:
+//!   ```json
+//!   { "probe": { "width_px": 384, "height_px": 350, "footprint_mm": 38.4, "depth_mm": 35.0 },
+//!     "tcp_T_us": { "rotation": [[1,0,0],[0,0,-1],[0,1,0]], "translation": [-19.2,0,0] },
+//!     "ee_T_tcp": { "rotation": [[1,0,0],[0,1,0],[0,0,1]], "translation": [0,0,165] } }
+//!   ```
+//!   Rotations row-major, translations mm; frames as in [`ribreg_core::probe`].
+//! * `poses.csv` — `t,x,y,z,qw,qx,qy,qz`: flange pose `b_T_ee` (s, mm, unit quaternion)
+//!   at ~100 Hz, tracker clock.
+//! * `frames.csv` — `frame,t,u,v`: one annotated bone pixel a line (frame number, video
+//!   time stamp s, column and row in pixels); every line of a frame has its time stamp,
+//!   frames without bone pixels have no line.
+//! * `calib_tracker.csv` — `t,x,y,z` (TCP positions of the calibration sweep, ~100 Hz);
+//!   `calib_video.csv` — `t,row` (landmark row per frame, ~30 fps).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use nalgebra::{Isometry3, Matrix3, Vector3};
+use ribreg_core::compound::{Compounder, FrameStats, VoxelStats, DEFAULT_MAX_COARSENINGS};
+use ribreg_core::geom::Rigid;
+use ribreg_core::probe::{Calibration, ProbeModel};
+use ribreg_core::rng::Rng;
+use ribreg_core::temporal::{self, LagEstimate, TrackerSample, VideoSample};
+use ribreg_core::track::{TrackedPose, TRACK_CAPACITY};
+use ribreg_core::{Error, Vec3};
+use serde::{Deserialize, Serialize};
+
+use crate::io::{self, Cloud, PlyFormat};
+use crate::phantom::{PhantomConfig, PhantomPair, Pose, SubjectGeometry, MESH_EDGE_MM};
+use crate::register::CliError;
+
+pub(crate) mod sim;
+
+/// Voxel capacity of host compounding: 8192 × 24 B = 192 KiB, enough for a whole-chest
+/// sweep at 2 mm (the phantom sweeps fill 4,000–6,500 voxels). The controller keeps
+/// [`ribreg_core::compound::VOXEL_CAPACITY`] (2048) and coarsens to 4 mm instead.
+pub const HOST_VOXEL_CAPACITY: usize = 8192;
+
+/// Columns of `poses.csv`.
+pub const POSE_COLUMNS: [&str; 8] = ["t", "x", "y", "z", "qw", "qx", "qy", "qz"];
+/// Columns of `frames.csv`.
+pub const FRAME_COLUMNS: [&str; 4] = ["frame", "t", "u", "v"];
+/// Columns of `calib_tracker.csv`.
+pub const TRACKER_COLUMNS: [&str; 4] = ["t", "x", "y", "z"];
+/// Columns of `calib_video.csv`.
+pub const VIDEO_COLUMNS: [&str; 2] = ["t", "row"];
+
+/// Simulated sweep settings (`ribreg phantom sweep`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SweepConfig {
+    /// Video lag behind the tracker, ms (paper's rig: 268).
+    pub lag_ms: f64,
+    /// Distance between scan lines, mm.
+    pub line_spacing_mm: f64,
+    /// Probe speed along the path, mm/s.
+    pub speed_mm_s: f64,
+    /// Overrun of each line beyond the cartilages' lateral extent, mm.
+    pub margin_mm: f64,
+    /// Soft tissue over the chest reference surface (skin height above it), mm.
+    pub skin_offset_mm: f64,
+    /// Annotation noise of a bone pixel's row (SD), pixels.
+    pub pixel_noise_px: f64,
+    /// Every this many image columns is annotated.
+    pub column_step_px: u16,
+    /// Fraction of frames lost (not in the log).
+    pub frame_miss_rate: f64,
+    /// Tracking noise per coordinate (SD), mm.
+    pub tracker_noise_mm: f64,
+    /// Video time-stamp jitter (SD), ms.
+    pub timestamp_jitter_ms: f64,
+    /// Frame rate, Hz.
+    pub frame_rate_hz: f64,
+    /// Tracker rate, Hz.
+    pub pose_rate_hz: f64,
+    /// Length of the temporal-calibration sweep, s.
+    pub calibration_duration_s: f64,
+    /// Peak amplitude of the calibration motion along the beam, mm.
+    pub calibration_amplitude_mm: f64,
+    /// Landmark row noise of the calibration sweep (SD), pixels.
+    pub calibration_noise_px: f64,
+}
+
+impl Default for SweepConfig {
+    fn default() -> Self {
+        SweepConfig {
+            lag_ms: 268.0,
+            line_spacing_mm: 10.0,
+            speed_mm_s: 20.0,
+            margin_mm: 10.0,
+            skin_offset_mm: 10.0,
+            pixel_noise_px: 2.0,
+            column_step_px: 4,
+            frame_miss_rate: 0.05,
+            tracker_noise_mm: 0.05,
+            timestamp_jitter_ms: 1.0,
+            frame_rate_hz: 30.0,
+            pose_rate_hz: 100.0,
+            calibration_duration_s: 20.0,
+            calibration_amplitude_mm: 10.0,
+            calibration_noise_px: 0.5,
+        }
+    }
+}
+
+impl SweepConfig {
+    /// Checks ranges: positive spacing, speed and rates, lag within ±1 s, rates below
+    /// 10 kHz, probabilities in [0, 1), non-negative noises.
+    pub fn validate(&self) -> Result<(), CliError> {
+        let bad = |what: &str| Err(CliError::Usage(format!("sweep: {what}")));
+        let pos = |v: f64| v.is_finite() && v > 0.0;
+        let nonneg = |v: f64| v.is_finite() && v >= 0.0;
+        if !(self.lag_ms.is_finite() && self.lag_ms.abs() <= 1000.0) {
+            return bad("lag must be within ±1000 ms");
+        }
+        if !pos(self.line_spacing_mm) || !pos(self.speed_mm_s) || self.speed_mm_s > 500.0 {
+            return bad("line spacing and speed must be positive (speed at most 500 mm/s)");
+        }
+        if !(pos(self.frame_rate_hz) && pos(self.pose_rate_hz))
+            || self.frame_rate_hz > 1e4
+            || self.pose_rate_hz > 1e4
+        {
+            return bad("frame and pose rates must be positive and below 10 kHz");
+        }
+        if !(0.0..1.0).contains(&self.frame_miss_rate) {
+            return bad("frame miss rate must be in [0, 1)");
+        }
+        let noises = [
+            self.margin_mm,
+            self.skin_offset_mm,
+            self.pixel_noise_px,
+            self.tracker_noise_mm,
+            self.timestamp_jitter_ms,
+            self.calibration_noise_px,
+            self.calibration_amplitude_mm,
+        ];
+        if !noises.into_iter().all(nonneg) || !pos(self.calibration_duration_s) {
+            return bad("margins, offsets, noises and amplitudes must be non-negative");
+        }
+        Ok(())
+    }
+}
+
+/// The default spatial calibration of the simulations: [`ProbeModel::LINEAR_38MM`],
+/// centred image, a 165 mm holder along the flange axis.
+pub fn default_calibration() -> Calibration {
+    Calibration::centred(
+        ProbeModel::LINEAR_38MM,
+        Rigid {
+            rotation: Matrix3::identity(),
+            translation: Vec3::new(0.0, 0.0, 165.0),
+        },
+    )
+}
+
+/// `probe.json`: see the module docs.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProbeFile {
+    /// Image geometry.
+    pub probe: ProbeJson,
+    /// Image frame in the TCP frame.
+    #[serde(rename = "tcp_T_us")]
+    pub tcp_t_us: Pose,
+    /// TCP frame in the flange frame (the holder).
+    #[serde(rename = "ee_T_tcp")]
+    pub ee_t_tcp: Pose,
+}
+
+/// The `probe` object of `probe.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProbeJson {
+    /// Image width, pixels.
+    pub width_px: u16,
+    /// Image height, pixels.
+    pub height_px: u16,
+    /// Footprint, mm.
+    pub footprint_mm: f32,
+    /// Imaging depth, mm.
+    pub depth_mm: f32,
+}
+
+fn rigid_of(p: &Pose) -> Rigid {
+    Rigid {
+        rotation: Matrix3::from_fn(|i, j| p.rotation[i][j] as f32),
+        translation: Vec3::new(
+            p.translation[0] as f32,
+            p.translation[1] as f32,
+            p.translation[2] as f32,
+        ),
+    }
+}
+
+fn pose_of(r: &Rigid) -> Pose {
+    Pose {
+        rotation: std::array::from_fn(|i| std::array::from_fn(|j| f64::from(r.rotation[(i, j)]))),
+        translation: std::array::from_fn(|i| f64::from(r.translation[i])),
+    }
+}
+
+impl ProbeFile {
+    /// The file of a calibration.
+    pub fn from_calibration(c: &Calibration) -> ProbeFile {
+        ProbeFile {
+            probe: ProbeJson {
+                width_px: c.probe.width_px,
+                height_px: c.probe.height_px,
+                footprint_mm: c.probe.footprint_mm,
+                depth_mm: c.probe.depth_mm,
+            },
+            tcp_t_us: pose_of(&c.tcp_t_us),
+            ee_t_tcp: pose_of(&c.ee_t_tcp),
+        }
+    }
+
+    /// The calibration, validated.
+    pub fn calibration(&self) -> Result<Calibration, Error> {
+        let c = Calibration {
+            probe: ProbeModel {
+                width_px: self.probe.width_px,
+                height_px: self.probe.height_px,
+                footprint_mm: self.probe.footprint_mm,
+                depth_mm: self.probe.depth_mm,
+            },
+            tcp_t_us: rigid_of(&self.tcp_t_us),
+            ee_t_tcp: rigid_of(&self.ee_t_tcp),
+        };
+        c.validate()?;
+        Ok(c)
+    }
+
+    /// Reads and validates `probe.json`.
+    pub fn read(path: &Path) -> Result<Calibration, CliError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| CliError::Usage(format!("{}: cannot read: {e}", path.display())))?;
+        let file: ProbeFile = serde_json::from_str(&text)
+            .map_err(|e| CliError::Usage(format!("{}: {e}", path.display())))?;
+        file.calibration()
+            .map_err(|e| CliError::Usage(format!("{}: {e}", path.display())))
+    }
+}
+
+/// One line of `poses.csv`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PoseRow {
+    /// Time, s.
+    pub t: f64,
+    /// Flange position, mm.
+    pub position: [f64; 3],
+    /// Flange orientation `[w, x, y, z]`.
+    pub quaternion: [f64; 4],
+}
+
+impl PoseRow {
+    fn from_isometry(t: f64, iso: &Isometry3<f64>, noise: Vector3<f64>) -> PoseRow {
+        let p = iso.translation.vector + noise;
+        let q = iso.rotation.into_inner();
+        PoseRow {
+            t,
+            position: [p.x, p.y, p.z],
+            quaternion: [q.w, q.i, q.j, q.k],
+        }
+    }
+
+    fn row(&self) -> [f64; 8] {
+        let [x, y, z] = self.position;
+        let [w, i, j, k] = self.quaternion;
+        [self.t, x, y, z, w, i, j, k]
+    }
+}
+
+/// One line of `frames.csv`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameRow {
+    /// Frame number.
+    pub frame: u32,
+    /// Video time stamp, s.
+    pub t: f64,
+    /// Column, pixels.
+    pub u: f64,
+    /// Row, pixels.
+    pub v: f64,
+}
+
+/// Reads `poses.csv`.
+pub fn read_poses(path: &Path) -> Result<Vec<PoseRow>, CliError> {
+    Ok(io::read_table_csv(path, POSE_COLUMNS)?
+        .into_iter()
+        .map(|r| PoseRow {
+            t: r[0],
+            position: [r[1], r[2], r[3]],
+            quaternion: [r[4], r[5], r[6], r[7]],
+        })
+        .collect())
+}
+
+/// Reads `frames.csv`; frame numbers must be whole numbers in `u32`.
+pub fn read_frames(path: &Path) -> Result<Vec<FrameRow>, CliError> {
+    io::read_table_csv(path, FRAME_COLUMNS)?
+        .into_iter()
+        .enumerate()
+        .map(|(i, r)| {
+            if r[0].fract() != 0.0 || !(0.0..=f64::from(u32::MAX)).contains(&r[0]) {
+                return Err(CliError::Usage(format!(
+                    "{}: row {}: frame number {} is not a whole number ≥ 0",
+                    path.display(),
+                    i + 1,
+                    r[0]
+                )));
+            }
+            Ok(FrameRow {
+                frame: r[0] as u32,
+                t: r[1],
+                u: r[2],
+                v: r[3],
+            })
+        })
+        .collect()
+}
+
+/// What [`compound`] built.
+#[derive(Clone, Debug)]
+pub struct CompoundOutcome {
+    /// The US cloud (voxel centroids), robot base frame.
+    pub points: Vec<[f64; 3]>,
+    /// Frames placed and refused.
+    pub frames: FrameStats,
+    /// Points accepted, merged and refused.
+    pub voxels: VoxelStats,
+    /// Final voxel edge, mm.
+    pub voxel_mm: f32,
+    /// Poses refused (not finite, not later than the one before, not a unit quaternion).
+    pub poses_refused: u32,
+    /// Refused frames by reason (the core error's message with numbers stripped).
+    pub refusals: BTreeMap<&'static str, u32>,
+}
+
+/// Replays logs through the core [`Compounder`] in arrival order, as the controller
+/// receives them: every frame is placed once the first pose at or after its lag-corrected
+/// time has arrived (the window holds [`TRACK_CAPACITY`] poses, the cloud
+/// [`HOST_VOXEL_CAPACITY`] voxels).
+pub fn compound(
+    cal: &Calibration,
+    lag_s: f64,
+    voxel_mm: f32,
+    poses: &[PoseRow],
+    frames: &[FrameRow],
+) -> Result<CompoundOutcome, CliError> {
+    let mut c: Box<Compounder<TRACK_CAPACITY, HOST_VOXEL_CAPACITY>> = Box::new(Compounder::new(
+        *cal,
+        lag_s,
+        voxel_mm,
+        DEFAULT_MAX_COARSENINGS,
+    )?);
+    // Group the pixel rows into frames (consecutive lines of one frame number).
+    let mut groups: Vec<(f64, Vec<[f32; 2]>)> = Vec::new();
+    let mut last: Option<u32> = None;
+    for (i, f) in frames.iter().enumerate() {
+        if last == Some(f.frame) {
+            let g = groups
+                .last_mut()
+                .expect("a group exists after the first row");
+            if g.0 != f.t {
+                return Err(CliError::Usage(format!(
+                    "frames: row {}: frame {} has two time stamps ({} and {})",
+                    i + 1,
+                    f.frame,
+                    g.0,
+                    f.t
+                )));
+            }
+            g.1.push([f.u as f32, f.v as f32]);
+        } else {
+            groups.push((f.t, vec![[f.u as f32, f.v as f32]]));
+            last = Some(f.frame);
+        }
+    }
+    groups.sort_by(|a, b| a.0.total_cmp(&b.0));
+
+    let mut refusals = BTreeMap::new();
+    let mut refuse = |e: Error| {
+        let reason = match e {
+            Error::OutsideTrack { .. } => "outside the tracked time range",
+            Error::TrackGap { .. } => "across a gap in the pose stream",
+            Error::Pixel { .. } => "a pixel outside the image",
+            _ => "invalid frame",
+        };
+        *refusals.entry(reason).or_insert(0u32) += 1;
+    };
+    let mut next = 0usize;
+    let mut place = |c: &mut Compounder<TRACK_CAPACITY, HOST_VOXEL_CAPACITY>,
+                     upto: f64,
+                     next: &mut usize|
+     -> Result<(), CliError> {
+        while let Some((t, pixels)) = groups.get(*next) {
+            if t - lag_s > upto {
+                break;
+            }
+            match c.add_frame(*t, pixels) {
+                Ok(_) => {}
+                Err(
+                    e @ (Error::OutsideTrack { .. }
+                    | Error::TrackGap { .. }
+                    | Error::Pixel { .. }
+                    | Error::Sample { .. }),
+                ) => refuse(e),
+                Err(e) => return Err(e.into()),
+            }
+            *next += 1;
+        }
+        Ok(())
+    };
+    for p in poses {
+        let q = p.quaternion.map(|v| v as f32);
+        let pos = Vec3::new(
+            p.position[0] as f32,
+            p.position[1] as f32,
+            p.position[2] as f32,
+        );
+        // A bad pose is refused and counted, as the controller does; it is not fatal.
+        match TrackedPose::new(p.t, pos, q) {
+            Ok(pose) => {
+                if c.add_pose(pose).is_ok() {
+                    place(&mut c, p.t, &mut next)?;
+                }
+            }
+            Err(_) => c.track.refused += 1,
+        }
+    }
+    place(&mut c, f64::INFINITY, &mut next)?;
+    let frames = c.frames;
+    let poses_refused = c.track.refused;
+    let voxels = c.cloud.stats;
+    let voxel_mm = c.cloud.voxel_mm();
+    let points = c
+        .cloud
+        .finish()
+        .iter()
+        .map(|p| p.cast::<f64>().into())
+        .collect();
+    Ok(CompoundOutcome {
+        points,
+        frames,
+        voxels,
+        voxel_mm,
+        poses_refused,
+        refusals,
+    })
+}
+
+/// Temporal calibration from the two CSV files.
+pub fn calibrate_temporal(tracker: &Path, video: &Path) -> Result<LagEstimate, CliError> {
+    let tr: Vec<TrackerSample> = io::read_table_csv(tracker, TRACKER_COLUMNS)?
+        .into_iter()
+        .map(|r| TrackerSample {
+            t: r[0],
+            position: Vec3::new(r[1] as f32, r[2] as f32, r[3] as f32),
+        })
+        .collect();
+    let vi: Vec<VideoSample> = io::read_table_csv(video, VIDEO_COLUMNS)?
+        .into_iter()
+        .map(|r| VideoSample {
+            t: r[0],
+            row: r[1] as f32,
+        })
+        .collect();
+    Ok(temporal::calibrate(&tr, &vi)?)
+}
+
+/// Rows of `calib_tracker.csv` (`t,x,y,z`) and `calib_video.csv` (`t,row`).
+pub type CalibrationLogs = (Vec<[f64; 4]>, Vec<[f64; 2]>);
+
+/// A simulated temporal-calibration sweep alone (`calib_tracker.csv` and
+/// `calib_video.csv` rows) for `seed`.
+pub fn simulate_calibration(cfg: &SweepConfig, seed: u64) -> Result<CalibrationLogs, CliError> {
+    cfg.validate()?;
+    let mut rng = Rng::new(seed ^ STREAM_CALIBRATION.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    Ok(sim::calibration_sweep(
+        cfg,
+        &default_calibration(),
+        &mut rng,
+    ))
+}
+
+/// Everything `ribreg phantom sweep` writes, in memory.
+pub struct SweepLogs {
+    /// The phantom pair (its target is the ideal, noise-free US cloud).
+    pub pair: PhantomPair,
+    /// The spatial calibration.
+    pub calibration: Calibration,
+    /// Flange poses of the scan.
+    pub poses: Vec<PoseRow>,
+    /// Bone pixels of the scan.
+    pub frames: Vec<FrameRow>,
+    /// Calibration sweep: tracked TCP positions `t,x,y,z`.
+    pub calib_tracker: Vec<[f64; 4]>,
+    /// Calibration sweep: landmark rows `t,row`.
+    pub calib_video: Vec<[f64; 2]>,
+    /// Summary for `sweep.json`.
+    pub summary: serde_json::Value,
+}
+
+/// Seed stream of the sweep simulation (distinct from the phantom's streams).
+const STREAM_SWEEP: u64 = 0x5EE9;
+/// Seed stream of the temporal-calibration sweep.
+const STREAM_CALIBRATION: u64 = 0xCA1B;
+
+/// Simulates the sweep of the phantom of `phantom` (its US target is generated noise-free,
+/// without holes or outliers: the ideal cloud the compounded one is compared with).
+pub fn simulate(phantom: &PhantomConfig, cfg: &SweepConfig) -> Result<SweepLogs, CliError> {
+    cfg.validate()?;
+    let ideal = PhantomConfig {
+        us_noise_mm: 0.0,
+        outlier_fraction: 0.0,
+        missing_patches: 0,
+        ..phantom.clone()
+    };
+    let pair = PhantomPair::generate(&ideal);
+    let calibration = default_calibration();
+    let mesh = SubjectGeometry::new(&pair.patient_params).mesh(MESH_EDGE_MM);
+    let base_t_patient = sim::pose_isometry(&pair.pose);
+    let mut rng = Rng::new(phantom.seed ^ STREAM_SWEEP.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    let scan = sim::scan(
+        cfg,
+        &calibration,
+        &pair.patient_params,
+        &mesh,
+        &base_t_patient,
+        &mut rng,
+    );
+    let (calib_tracker, calib_video) = simulate_calibration(cfg, phantom.seed)?;
+    let summary = serde_json::json!({
+        "sweep": cfg,
+        "phantom": ideal,
+        "true_lag_ms": cfg.lag_ms,
+        "scan": {
+            "lines": scan.lines,
+            "duration_s": scan.duration_s,
+            "poses": scan.poses.len(),
+            "frames_captured": scan.captured,
+            "frames_logged": scan.frames.iter().map(|f| f.frame).collect::<std::collections::BTreeSet<_>>().len(),
+            "pixels": scan.frames.len(),
+        },
+        "calibration_sweep": { "tracker": calib_tracker.len(), "frames": calib_video.len() },
+    });
+    Ok(SweepLogs {
+        pair,
+        calibration,
+        poses: scan.poses,
+        frames: scan.frames,
+        calib_tracker,
+        calib_video,
+        summary,
+    })
+}
+
+impl SweepLogs {
+    /// Writes the phantom files (`template.ply`, `waypoints.csv`, `true_waypoints.csv`,
+    /// `target.ply` = ideal US cloud, `params.json`) and the sweep files (`probe.json`,
+    /// `poses.csv`, `frames.csv`, `calib_tracker.csv`, `calib_video.csv`, `sweep.json`).
+    pub fn write(&self, dir: &Path) -> Result<(), CliError> {
+        crate::demo::write_phantom(&self.pair, dir)?;
+        let probe = serde_json::to_string_pretty(&ProbeFile::from_calibration(&self.calibration))
+            .map_err(|e| CliError::Usage(format!("probe.json: {e}")))?;
+        io::write_text(&dir.join("probe.json"), &probe)?;
+        let poses: Vec<[f64; 8]> = self.poses.iter().map(PoseRow::row).collect();
+        io::write_table_csv(&dir.join("poses.csv"), POSE_COLUMNS, &poses)?;
+        let frames: Vec<[f64; 4]> = self
+            .frames
+            .iter()
+            .map(|f| [f64::from(f.frame), f.t, f.u, (f.v * 100.0).round() / 100.0])
+            .collect();
+        io::write_table_csv(&dir.join("frames.csv"), FRAME_COLUMNS, &frames)?;
+        io::write_table_csv(
+            &dir.join("calib_tracker.csv"),
+            TRACKER_COLUMNS,
+            &self.calib_tracker,
+        )?;
+        io::write_table_csv(
+            &dir.join("calib_video.csv"),
+            VIDEO_COLUMNS,
+            &self.calib_video,
+        )?;
+        let summary = serde_json::to_string_pretty(&self.summary)
+            .map_err(|e| CliError::Usage(format!("sweep.json: {e}")))?;
+        io::write_text(&dir.join("sweep.json"), &summary)?;
+        Ok(())
+    }
+}
+
+/// Writes a compounded cloud as PLY (binary little-endian).
+pub fn write_cloud(path: &Path, points: &[[f64; 3]]) -> Result<(), CliError> {
+    io::write_ply(
+        path,
+        &Cloud {
+            points: points.to_vec(),
+            labels: None,
+        },
+        PlyFormat::BinaryLittleEndian,
+    )?;
+    Ok(())
+}
+
+/// End-to-end result of [`end_to_end`].
+#[derive(Clone, Debug)]
+pub struct EndToEnd {
+    /// The temporal calibration.
+    pub lag: LagEstimate,
+    /// The compounded cloud and its counters.
+    pub compound: CompoundOutcome,
+    /// Waypoint error (mean, SD, max; mm) registering onto the compounded cloud.
+    pub sweep_waypoints: (f64, f64, f64),
+    /// Waypoint error registering onto the ideal cloud (`target.ply`).
+    pub ideal_waypoints: (f64, f64, f64),
+    /// Points of the ideal cloud.
+    pub ideal_points: usize,
+}
+
+impl EndToEnd {
+    /// The summary written to `end_to_end.json`.
+    pub fn json(&self, true_lag_ms: f64) -> serde_json::Value {
+        let wp = |e: (f64, f64, f64)| serde_json::json!({ "mean": e.0, "sd": e.1, "max": e.2 });
+        serde_json::json!({
+            "lag_ms": self.lag.lag_s * 1e3,
+            "true_lag_ms": true_lag_ms,
+            "lag_error_ms": self.lag.lag_s * 1e3 - true_lag_ms,
+            "lag_rmse_px": self.lag.rmse_px,
+            "lag_pairs": self.lag.pairs,
+            "compound": {
+                "points": self.compound.points.len(),
+                "voxel_mm": self.compound.voxel_mm,
+                "frames_placed": self.compound.frames.placed,
+                "frames_outside_track": self.compound.frames.outside_track,
+                "frames_invalid": self.compound.frames.invalid,
+                "points_accepted": self.compound.voxels.accepted,
+                "points_merged": self.compound.voxels.merged,
+                "points_refused_full": self.compound.voxels.refused_full,
+                "coarsenings": self.compound.voxels.coarsenings,
+                "poses_refused": self.compound.poses_refused,
+            },
+            "waypoint_error_mm": {
+                "compounded": wp(self.sweep_waypoints),
+                "ideal": wp(self.ideal_waypoints),
+                "difference_of_means": self.sweep_waypoints.0 - self.ideal_waypoints.0,
+            },
+            "ideal_points": self.ideal_points,
+        })
+    }
+}
+
+/// The whole chain on the files `ribreg phantom sweep` wrote to `dir`: temporal
+/// calibration → compounding with the estimated lag → registration (improved method) of
+/// `template.ply` onto the compounded cloud and onto the ideal `target.ply` → waypoint
+/// errors against `true_waypoints.csv`. Writes `us_compounded.ply`, `lag.json` and
+/// `mapped_waypoints*.csv` to `dir`.
+pub fn end_to_end(
+    dir: &Path,
+    voxel_mm: f32,
+    progress: &mut dyn FnMut(&str),
+) -> Result<EndToEnd, CliError> {
+    use crate::register::{register_clouds, to_core, to_core_labels, to_file, Method};
+    use ribreg_core::error::Cloud as Which;
+    let lag = calibrate_temporal(&dir.join("calib_tracker.csv"), &dir.join("calib_video.csv"))?;
+    progress(&format!(
+        "temporal calibration: lag {:.1} ms, NCC {:.3}, residual {:.2} px over {} frames",
+        lag.lag_s * 1e3,
+        lag.ncc,
+        lag.rmse_px,
+        lag.pairs
+    ));
+    let cal = ProbeFile::read(&dir.join("probe.json"))?;
+    let poses = read_poses(&dir.join("poses.csv"))?;
+    let frames = read_frames(&dir.join("frames.csv"))?;
+    let compound = compound(&cal, lag.lag_s, voxel_mm, &poses, &frames)?;
+    progress(&format!(
+        "compounded {} frames ({} refused) into {} points of {} mm",
+        compound.frames.placed,
+        compound.frames.outside_track + compound.frames.invalid,
+        compound.points.len(),
+        compound.voxel_mm
+    ));
+    write_cloud(&dir.join("us_compounded.ply"), &compound.points)?;
+    let template_path = dir.join("template.ply");
+    let template = io::read_ply(&template_path)?;
+    let labels = to_core_labels(&template_path, &template.labels)?;
+    let template_pts = to_core(&template.points, Which::Template)?;
+    let waypoints = to_core(
+        &io::read_points_csv(&dir.join("waypoints.csv"))?,
+        Which::Query,
+    )?;
+    let truth = io::read_points_csv(&dir.join("true_waypoints.csv"))?;
+    let mut errors = |target: &[[f64; 3]], name: &str| -> Result<(f64, f64, f64), CliError> {
+        let target = to_core(target, Which::Target)?;
+        let o = register_clouds(
+            &template_pts,
+            labels.as_deref(),
+            &target,
+            Some(&waypoints),
+            Method::Improved,
+            &mut |_| {},
+        )?;
+        let mapped = o.waypoints.unwrap_or_default();
+        io::write_points_csv(
+            &dir.join(format!("mapped_waypoints_{name}.csv")),
+            &to_file(&mapped),
+        )?;
+        let e = crate::demo::paired_errors(&mapped, &truth);
+        progress(&format!(
+            "registered onto the {name} cloud: waypoint error {:.2} ± {:.2} mm (max {:.2})",
+            e.0, e.1, e.2
+        ));
+        Ok(e)
+    };
+    let sweep_waypoints = errors(&compound.points, "compounded")?;
+    let ideal = io::read_ply(&dir.join("target.ply"))?;
+    let ideal_waypoints = errors(&ideal.points, "ideal")?;
+    Ok(EndToEnd {
+        lag,
+        compound,
+        sweep_waypoints,
+        ideal_waypoints,
+        ideal_points: ideal.points.len(),
+    })
+}
