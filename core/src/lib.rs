@@ -20,6 +20,10 @@
 //! evaluation shows the published stage needs. One registration's working state is about
 //! 38 KiB (README, "Performance and memory").
 //!
+//! The US cloud itself is built from a robot-tracked sweep: [`probe`] spatial calibration
+//! (paper Eq. 1), [`temporal`] lag estimation by normalised cross-correlation, [`track`]
+//! pose window with lerp/slerp interpolation, [`compound`] bounded voxel compounding.
+//!
 //! ```
 //! use ribreg_core::{pipeline::{register, Config, Template}, local_rigid::TransformCache, Vec3};
 //! # fn cage() -> Vec<Vec3> { ribreg_core::example::cage(0.0).collect() }

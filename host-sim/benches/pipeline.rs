@@ -1,6 +1,7 @@
 //! Criterion benchmarks of the registration (issue: skeleton extraction on a 3,000-point
 //! cloud, mapping 5,000 points, a whole `register` of a 3,000-point target and a
-//! 5,000-point template). Run: `cargo bench -p ribreg-sim --bench pipeline`.
+//! 5,000-point template), and the sweep's per-frame compounding and temporal calibration.
+//! Run: `cargo bench -p ribreg-sim --bench pipeline`.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use ribreg_core::error::Cloud as Which;
@@ -73,9 +74,87 @@ fn benches(c: &mut Criterion) {
     }
 }
 
+/// The controller's per-message work of a sweep (issue 4): placing one annotated frame
+/// (96 bone pixels, the most a 384-pixel image annotated every 4th column has) into a
+/// voxel cloud already holding a whole chest, and one temporal calibration (20 s sweep).
+fn sweep_benches(c: &mut Criterion) {
+    use ribreg_core::compound::{
+        Compounder, DEFAULT_MAX_COARSENINGS, DEFAULT_VOXEL_MM, VOXEL_CAPACITY,
+    };
+    use ribreg_core::temporal::{calibrate, TrackerSample, VideoSample};
+    use ribreg_core::track::{TrackedPose, TRACK_CAPACITY};
+    use ribreg_sim::sweep::{self, SweepConfig};
+
+    let logs = sweep::simulate(&PhantomConfig::default(), &SweepConfig::default()).unwrap();
+    let mut comp: Box<Compounder<TRACK_CAPACITY, VOXEL_CAPACITY>> = Box::new(
+        Compounder::new(
+            logs.calibration,
+            0.268,
+            DEFAULT_VOXEL_MM,
+            DEFAULT_MAX_COARSENINGS,
+        )
+        .unwrap(),
+    );
+    let poses: Vec<TrackedPose> = logs
+        .poses
+        .iter()
+        .map(|p| {
+            let pos = Vec3::new(
+                p.position[0] as f32,
+                p.position[1] as f32,
+                p.position[2] as f32,
+            );
+            TrackedPose::new(p.t, pos, p.quaternion.map(|v| v as f32)).unwrap()
+        })
+        .collect();
+    // Fill the cloud with the whole sweep, keeping the last 128 poses.
+    let out = sweep::compound(
+        &logs.calibration,
+        0.268,
+        DEFAULT_VOXEL_MM,
+        &logs.poses,
+        &logs.frames,
+    )
+    .unwrap();
+    for p in &poses[poses.len() - TRACK_CAPACITY..] {
+        comp.add_pose(*p).unwrap();
+    }
+    for p in out.points.iter().take(VOXEL_CAPACITY) {
+        let _ = comp
+            .cloud
+            .insert(&Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32));
+    }
+    let t = poses[poses.len() - 50].t + 0.268;
+    let pixels: Vec<[f32; 2]> = (0..96)
+        .map(|k| [4.0 * k as f32 + 0.5, 180.0 + (k % 7) as f32])
+        .collect();
+    c.bench_function("compound_frame_96_pixels_full_cloud", |b| {
+        b.iter(|| comp.add_frame(black_box(t), black_box(&pixels)).unwrap())
+    });
+    let tracker: Vec<TrackerSample> = logs
+        .calib_tracker
+        .iter()
+        .map(|r| TrackerSample {
+            t: r[0],
+            position: Vec3::new(r[1] as f32, r[2] as f32, r[3] as f32),
+        })
+        .collect();
+    let video: Vec<VideoSample> = logs
+        .calib_video
+        .iter()
+        .map(|r| VideoSample {
+            t: r[0],
+            row: r[1] as f32,
+        })
+        .collect();
+    c.bench_function("temporal_calibration_20s", |b| {
+        b.iter(|| calibrate(black_box(&tracker), black_box(&video)).unwrap())
+    });
+}
+
 criterion_group! {
     name = pipeline;
     config = Criterion::default().sample_size(20);
-    targets = benches
+    targets = benches, sweep_benches
 }
 criterion_main!(pipeline);

@@ -38,7 +38,7 @@ use crate::register::CliError;
 pub(crate) mod sim;
 
 /// Voxel capacity of host compounding: 8192 × 24 B = 192 KiB, enough for a whole-chest
-/// sweep at 2 mm (the phantom sweeps fill 4,000–6,500 voxels). The controller keeps
+/// sweep at 2 mm (the phantom sweeps fill 5,500–7,900 voxels; larger ones coarsen to 4 mm). The controller keeps
 /// [`ribreg_core::compound::VOXEL_CAPACITY`] (2048) and coarsens to 4 mm instead.
 pub const HOST_VOXEL_CAPACITY: usize = 8192;
 

@@ -56,3 +56,26 @@ fn working_state_fits_64_kib() {
     );
     assert!(kept + transient < 64 * 1024);
 }
+
+/// The sweep state the controller keeps while compounding (pose window + voxel cloud);
+/// its finished cloud is the registration's target, so it is live beside the state above.
+#[test]
+fn sweep_state_fits_64_kib() {
+    use ribreg_core::compound::{Compounder, VoxelCloud, VOXEL_CAPACITY};
+    use ribreg_core::track::{PoseTrack, TRACK_CAPACITY};
+    let rows = [
+        (
+            "PoseTrack<128> (1.28 s at 100 Hz)",
+            size_of::<PoseTrack<TRACK_CAPACITY>>(),
+        ),
+        ("VoxelCloud<2048>", size_of::<VoxelCloud<VOXEL_CAPACITY>>()),
+        (
+            "Compounder<128, 2048> (both + calibration)",
+            size_of::<Compounder<TRACK_CAPACITY, VOXEL_CAPACITY>>(),
+        ),
+    ];
+    for (name, bytes) in rows {
+        println!("{name:50} {bytes:6} B  {:5.1} KiB", bytes as f64 / 1024.0);
+    }
+    assert!(size_of::<Compounder<TRACK_CAPACITY, VOXEL_CAPACITY>>() < 64 * 1024);
+}
