@@ -1685,6 +1685,49 @@ pub fn register(
     Ok((reg.template_skeleton.points, reg.target_skeleton.points, f))
 }
 
+// ---------------------------------------------------------------------------------------
+// Robotic US: spatial calibration chain and pose interpolation
+// ---------------------------------------------------------------------------------------
+
+/// Paper Eq. 1, one frame at a time: pixel `(u, v)` scaled by `(s_x, s_y)` mm/pixel onto
+/// the image plane, then image → TCP → flange → base (`b_T_ee · ee_T_tcp · tcp_T_us`).
+pub fn pixel_to_base(
+    scale_mm: (f64, f64),
+    tcp_t_us: &Rigid,
+    ee_t_tcp: &Rigid,
+    b_t_ee: &Rigid,
+    u: f64,
+    v: f64,
+) -> P3 {
+    let image = [u * scale_mm.0, v * scale_mm.1, 0.0];
+    b_t_ee.apply(ee_t_tcp.apply(tcp_t_us.apply(image)))
+}
+
+/// Spherical linear interpolation of unit quaternions `(w, x, y, z)` along the shorter
+/// arc, by the closed form `sin((1−s)θ)/sin θ · q0 + sin(sθ)/sin θ · q1` (linear below
+/// 1e-9 rad).
+pub fn slerp(q0: [f64; 4], q1: [f64; 4], s: f64) -> [f64; 4] {
+    let mut d: f64 = (0..4).map(|i| q0[i] * q1[i]).sum();
+    let q1 = if d < 0.0 {
+        d = -d;
+        q1.map(|v| -v)
+    } else {
+        q1
+    };
+    let theta = d.clamp(-1.0, 1.0).acos();
+    let (a, b) = if theta < 1e-9 {
+        (1.0 - s, s)
+    } else {
+        (
+            ((1.0 - s) * theta).sin() / theta.sin(),
+            (s * theta).sin() / theta.sin(),
+        )
+    };
+    let q: [f64; 4] = std::array::from_fn(|i| a * q0[i] + b * q1[i]);
+    let n = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+    q.map(|v| v / n)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1779,47 +1822,4 @@ mod tests {
         assert_eq!(t.path(4, 2), vec![4, 3, 0, 2]);
         assert!((t.branch_length(4, &pts) - 3.0).abs() < 1e-12);
     }
-}
-
-// ---------------------------------------------------------------------------------------
-// Robotic US: spatial calibration chain and pose interpolation
-// ---------------------------------------------------------------------------------------
-
-/// Paper Eq. 1, one frame at a time: pixel `(u, v)` scaled by `(s_x, s_y)` mm/pixel onto
-/// the image plane, then image → TCP → flange → base (`b_T_ee · ee_T_tcp · tcp_T_us`).
-pub fn pixel_to_base(
-    scale_mm: (f64, f64),
-    tcp_t_us: &Rigid,
-    ee_t_tcp: &Rigid,
-    b_t_ee: &Rigid,
-    u: f64,
-    v: f64,
-) -> P3 {
-    let image = [u * scale_mm.0, v * scale_mm.1, 0.0];
-    b_t_ee.apply(ee_t_tcp.apply(tcp_t_us.apply(image)))
-}
-
-/// Spherical linear interpolation of unit quaternions `(w, x, y, z)` along the shorter
-/// arc, by the closed form `sin((1−s)θ)/sin θ · q0 + sin(sθ)/sin θ · q1` (linear below
-/// 1e-9 rad).
-pub fn slerp(q0: [f64; 4], q1: [f64; 4], s: f64) -> [f64; 4] {
-    let mut d: f64 = (0..4).map(|i| q0[i] * q1[i]).sum();
-    let q1 = if d < 0.0 {
-        d = -d;
-        q1.map(|v| -v)
-    } else {
-        q1
-    };
-    let theta = d.clamp(-1.0, 1.0).acos();
-    let (a, b) = if theta < 1e-9 {
-        (1.0 - s, s)
-    } else {
-        (
-            ((1.0 - s) * theta).sin() / theta.sin(),
-            (s * theta).sin() / theta.sin(),
-        )
-    };
-    let q: [f64; 4] = std::array::from_fn(|i| a * q0[i] + b * q1[i]);
-    let n = q.iter().map(|v| v * v).sum::<f64>().sqrt();
-    q.map(|v| v / n)
 }
