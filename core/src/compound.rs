@@ -327,6 +327,9 @@ impl<const POSES: usize, const VOXELS: usize> Compounder<POSES, VOXELS> {
             self.frames.invalid = self.frames.invalid.saturating_add(1);
             return Err(Error::Pixel { index: i as u32 });
         }
+        if self.cloud.finished {
+            return Err(Error::Config("the voxel cloud is finished"));
+        }
         if !t.is_finite() {
             self.frames.invalid = self.frames.invalid.saturating_add(1);
             return Err(Error::Sample {
@@ -342,13 +345,21 @@ impl<const POSES: usize, const VOXELS: usize> Compounder<POSES, VOXELS> {
             }
         };
         let b_t_us = b_t_ee.after(&self.ee_t_us);
+        // Note(unwrap): every pixel was checked above.
+        let point = |p: &[f32; 2]| b_t_us.apply(&probe.pixel_to_image(p[0], p[1]).unwrap());
+        // All or nothing: a point beyond MAX_COORD_MM (a pose at the edge of the range)
+        // refuses the frame before anything is inserted.
+        if let Some(i) = pixels
+            .iter()
+            .position(|p| !(point(p).amax() <= crate::MAX_COORD_MM))
+        {
+            self.frames.invalid = self.frames.invalid.saturating_add(1);
+            return Err(Error::Pixel { index: i as u32 });
+        }
         let mut kept = 0u32;
         for p in pixels {
-            // Note(unwrap): every pixel was checked above.
-            let q = b_t_us.apply(&probe.pixel_to_image(p[0], p[1]).unwrap());
-            // A pose within MAX_COORD_MM and a probe within 1 m keep q finite and in
-            // range, so only a full cloud refuses a point here.
-            if self.cloud.insert(&q)? {
+            // Checked above: only a full cloud (counted) or a finished one refuses.
+            if self.cloud.insert(&point(p))? {
                 kept += 1;
             }
         }

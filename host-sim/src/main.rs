@@ -368,6 +368,13 @@ fn main() -> ExitCode {
             let frames = sweep::read_frames(&frames)?;
             progress(&format!("{} poses, {} pixel rows; lag {lag_ms} ms", poses.len(), frames.len()));
             let o = sweep::compound(&cal, lag_ms * 1e-3, voxel_mm, &poses, &frames)?;
+            if o.points.is_empty() {
+                return Err(CliError::Usage(format!(
+                    "no bone point was placed: {} frames outside the tracked time range, {} invalid \
+                     (is the lag right, do the logs overlap in time?)",
+                    o.frames.outside_track, o.frames.invalid
+                )));
+            }
             sweep::write_cloud(&out, &o.points)?;
             println!(
                 "wrote {}: {} points ({} mm voxels); frames placed {}, refused {} outside the tracked \
