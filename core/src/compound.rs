@@ -349,10 +349,10 @@ impl<const POSES: usize, const VOXELS: usize> Compounder<POSES, VOXELS> {
         let point = |p: &[f32; 2]| b_t_us.apply(&probe.pixel_to_image(p[0], p[1]).unwrap());
         // All or nothing: a point beyond MAX_COORD_MM (a pose at the edge of the range)
         // refuses the frame before anything is inserted.
-        if let Some(i) = pixels
-            .iter()
-            .position(|p| !(point(p).amax() <= crate::MAX_COORD_MM))
-        {
+        if let Some(i) = pixels.iter().position(|p| {
+            let q = point(p);
+            !q.iter().all(|v| v.is_finite()) || q.amax() > crate::MAX_COORD_MM
+        }) {
             self.frames.invalid = self.frames.invalid.saturating_add(1);
             return Err(Error::Pixel { index: i as u32 });
         }

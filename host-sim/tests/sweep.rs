@@ -306,7 +306,10 @@ fn bad_logs_are_refused_with_the_line() {
         out.contains("frames placed 1, refused 1 outside the tracked range, 1 invalid"),
         "{out}"
     );
-    assert_refused(&run(args("1000", &probe, "frames.csv")), "no bone point was placed: 1 frames outside");
+    assert_refused(
+        &run(args("1000", &probe, "frames.csv")),
+        "no bone point was placed: 1 frames outside",
+    );
     let mut no_lag = args("0", &probe, "frames.csv");
     no_lag.drain(7..9);
     assert!(!run(no_lag).status.success());
