@@ -81,7 +81,7 @@ fn sweep_benches(c: &mut Criterion) {
     use ribreg_core::compound::{
         Compounder, DEFAULT_MAX_COARSENINGS, DEFAULT_VOXEL_MM, VOXEL_CAPACITY,
     };
-    use ribreg_core::temporal::{calibrate, TrackerSample, VideoSample};
+    use ribreg_core::temporal::calibrate;
     use ribreg_core::track::{TrackedPose, TRACK_CAPACITY};
     use ribreg_sim::sweep::{self, SweepConfig};
 
@@ -131,22 +131,7 @@ fn sweep_benches(c: &mut Criterion) {
     c.bench_function("compound_frame_96_pixels_full_cloud", |b| {
         b.iter(|| comp.add_frame(black_box(t), black_box(&pixels)).unwrap())
     });
-    let tracker: Vec<TrackerSample> = logs
-        .calib_tracker
-        .iter()
-        .map(|r| TrackerSample {
-            t: r[0],
-            position: Vec3::new(r[1] as f32, r[2] as f32, r[3] as f32),
-        })
-        .collect();
-    let video: Vec<VideoSample> = logs
-        .calib_video
-        .iter()
-        .map(|r| VideoSample {
-            t: r[0],
-            row: r[1] as f32,
-        })
-        .collect();
+    let (tracker, video) = sweep::calibration_samples(&logs.calib_tracker, &logs.calib_video);
     c.bench_function("temporal_calibration_20s", |b| {
         b.iter(|| calibrate(black_box(&tracker), black_box(&video)).unwrap())
     });

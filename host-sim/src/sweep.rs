@@ -454,22 +454,34 @@ pub fn compound(
     })
 }
 
-/// Temporal calibration from the two CSV files.
-pub fn calibrate_temporal(tracker: &Path, video: &Path) -> Result<LagEstimate, CliError> {
-    let tr: Vec<TrackerSample> = io::read_table_csv(tracker, TRACKER_COLUMNS)?
-        .into_iter()
+/// Calibration-sweep rows (`t,x,y,z` and `t,row`) as the core's samples.
+pub fn calibration_samples(
+    tracker: &[[f64; 4]],
+    video: &[[f64; 2]],
+) -> (Vec<TrackerSample>, Vec<VideoSample>) {
+    let tr = tracker
+        .iter()
         .map(|r| TrackerSample {
             t: r[0],
             position: Vec3::new(r[1] as f32, r[2] as f32, r[3] as f32),
         })
         .collect();
-    let vi: Vec<VideoSample> = io::read_table_csv(video, VIDEO_COLUMNS)?
-        .into_iter()
+    let vi = video
+        .iter()
         .map(|r| VideoSample {
             t: r[0],
             row: r[1] as f32,
         })
         .collect();
+    (tr, vi)
+}
+
+/// Temporal calibration from the two CSV files.
+pub fn calibrate_temporal(tracker: &Path, video: &Path) -> Result<LagEstimate, CliError> {
+    let (tr, vi) = calibration_samples(
+        &io::read_table_csv(tracker, TRACKER_COLUMNS)?,
+        &io::read_table_csv(video, VIDEO_COLUMNS)?,
+    );
     Ok(temporal::calibrate(&tr, &vi)?)
 }
 

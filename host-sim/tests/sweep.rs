@@ -1,8 +1,7 @@
 //! The robotic-US chain of issue 4: temporal calibration accuracy, the `calibrate`,
 //! `phantom sweep` and `compound` commands end to end into `register`, and bad logs.
 
-use ribreg_core::temporal::{calibrate, TrackerSample, VideoSample};
-use ribreg_core::Vec3;
+use ribreg_core::temporal::calibrate;
 use ribreg_sim::io;
 use ribreg_sim::phantom::PhantomConfig;
 use ribreg_sim::sweep::{self, SweepConfig};
@@ -27,6 +26,18 @@ fn stdout(o: &Output) -> String {
         String::from_utf8_lossy(&o.stderr)
     );
     String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// `ribreg calibrate temporal --tracker <dir/tracker> --video <dir/video>`.
+fn calibrate_cli(d: &Path, tracker: &str, video: &str) -> Output {
+    ribreg(&[
+        "calibrate",
+        "temporal",
+        "--tracker",
+        s(&d.join(tracker)),
+        "--video",
+        s(&d.join(video)),
+    ])
 }
 
 /// Asserts exit 2 with one `ribreg: error:` line containing `needle`.
@@ -58,20 +69,7 @@ fn temporal_calibration_within_2_ms_for_lags_0_to_400() {
                 ..SweepConfig::default()
             };
             let (tr, vi) = sweep::simulate_calibration(&cfg, seed).unwrap();
-            let tr: Vec<TrackerSample> = tr
-                .iter()
-                .map(|r| TrackerSample {
-                    t: r[0],
-                    position: Vec3::new(r[1] as f32, r[2] as f32, r[3] as f32),
-                })
-                .collect();
-            let vi: Vec<VideoSample> = vi
-                .iter()
-                .map(|r| VideoSample {
-                    t: r[0],
-                    row: r[1] as f32,
-                })
-                .collect();
+            let (tr, vi) = sweep::calibration_samples(&tr, &vi);
             let est = calibrate(&tr, &vi).unwrap();
             let err = est.lag_s * 1e3 - lag_ms;
             assert!(err.abs() <= 2.0, "lag {lag_ms} ms seed {seed}: {est:?}");
@@ -218,47 +216,19 @@ fn bad_logs_are_refused_with_the_line() {
     let (tr, vi) = sweep::simulate_calibration(&cfg, 0).unwrap();
     io::write_table_csv(&d.join("tr.csv"), sweep::TRACKER_COLUMNS, &tr).unwrap();
     io::write_table_csv(&d.join("vi.csv"), sweep::VIDEO_COLUMNS, &vi).unwrap();
-    let o = ribreg(&[
-        "calibrate",
-        "temporal",
-        "--tracker",
-        s(&d.join("tr.csv")),
-        "--video",
-        s(&d.join("vi.csv")),
-    ]);
+    let o = calibrate_cli(d, "tr.csv", "vi.csv");
     assert_refused(&o, "moves too little");
     // Wrong header, NaN, time going backwards.
     std::fs::write(d.join("bad.csv"), "t,x,y\n0,1,2\n").unwrap();
-    let o = ribreg(&[
-        "calibrate",
-        "temporal",
-        "--tracker",
-        s(&d.join("bad.csv")),
-        "--video",
-        s(&d.join("vi.csv")),
-    ]);
+    let o = calibrate_cli(d, "bad.csv", "vi.csv");
     assert_refused(&o, "expected header \"t,x,y,z\"");
     std::fs::write(d.join("nan.csv"), "t,row\n0,1\n0.1,nan\n").unwrap();
-    let o = ribreg(&[
-        "calibrate",
-        "temporal",
-        "--tracker",
-        s(&d.join("tr.csv")),
-        "--video",
-        s(&d.join("nan.csv")),
-    ]);
+    let o = calibrate_cli(d, "tr.csv", "nan.csv");
     assert_refused(&o, "line 3");
     let mut back = vi.clone();
     back[5][0] = back[4][0];
     io::write_table_csv(&d.join("back.csv"), sweep::VIDEO_COLUMNS, &back).unwrap();
-    let o = ribreg(&[
-        "calibrate",
-        "temporal",
-        "--tracker",
-        s(&d.join("tr.csv")),
-        "--video",
-        s(&d.join("back.csv")),
-    ]);
+    let o = calibrate_cli(d, "tr.csv", "back.csv");
     assert_refused(&o, "video sample 5");
 
     // Compound: a garbled probe file, a frame with two time stamps, a pixel outside the
