@@ -18,6 +18,16 @@ pub struct Tree<const N: usize> {
     len: usize,
 }
 
+impl<const N: usize> Default for Tree<N> {
+    /// The empty tree (no nodes).
+    fn default() -> Self {
+        Tree {
+            parent: [0; N],
+            len: 0,
+        }
+    }
+}
+
 impl<const N: usize> Tree<N> {
     /// Prim's MST of `points` (1..=N of them, N ≤ 255) rooted at point 0. Ties between
     /// equal edges go to the lower index, so the tree is deterministic.

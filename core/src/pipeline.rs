@@ -3,7 +3,7 @@
 
 use crate::endpoints::{match_endpoints, EndpointMatch};
 use crate::error::{Cloud, Error, Result};
-use crate::geom::{nearest, validate, Rigid};
+use crate::geom::{nearest, validate, Frame, Rigid};
 use crate::guided::{fit_ribs, label_nodes, target_skeleton, NodeLabels};
 use crate::local_rigid::{LocalRigid, NEIGHBOURS};
 use crate::skeleton::{RibEnds, RibSkeleton, SkeletonGraph, TURN_ANGLE_DEG};
@@ -138,6 +138,76 @@ impl Template {
 }
 
 /// A registration of a template onto one target.
+impl Template {
+    /// A guided-model template from its compact parts, as the controller receives it
+    /// (`wire::TemplatePart`): the live SOM-1 nodes with their rib labels, the frame of the
+    /// template's key points, the 30 rib skeleton points and the sternum split of each
+    /// rib. These are all [`register`] reads of a guided template; the graph's key points,
+    /// tree and hull are left empty. The parts are validated: 100..=400 finite nodes within
+    /// range, one label each, a proper frame, finite skeleton points, fractions in [0, 1].
+    pub fn from_parts(
+        som1: &[Vec3],
+        labels: &[u8],
+        frame: Frame,
+        skeleton: [Vec3; crate::skeleton::SKELETON_POINTS],
+        midline_fraction: [f32; 4],
+    ) -> Result<Template> {
+        validate(som1, Cloud::Template, 1, crate::skeleton::SOM1_CAPACITY)?;
+        validate(
+            &skeleton,
+            Cloud::Template,
+            1,
+            crate::skeleton::SKELETON_POINTS,
+        )?;
+        if labels.len() != som1.len() {
+            return Err(Error::LabelCount {
+                found: labels.len() as u32,
+                expected: som1.len() as u32,
+            });
+        }
+        let proper = crate::probe::is_proper_rigid(&Rigid {
+            rotation: frame.axes,
+            translation: frame.origin,
+        });
+        if !proper || !frame.spread.iter().all(|v| v.is_finite() && *v >= 0.0) {
+            return Err(Error::Config(
+                "template frame must be a finite proper rotation",
+            ));
+        }
+        if !midline_fraction.iter().all(|f| (0.0..=1.0).contains(f)) {
+            return Err(Error::Config(
+                "template sternum split fractions must be in [0, 1]",
+            ));
+        }
+        let mut nodes = heapless::Vec::new();
+        let mut node_labels = NodeLabels::new();
+        for (p, l) in som1.iter().zip(labels) {
+            // Note(unwrap): validate() bounded the count by SOM1_CAPACITY, both capacities.
+            nodes.push(*p).unwrap();
+            node_labels.push(*l).unwrap();
+        }
+        Ok(Template {
+            graph: SkeletonGraph {
+                som1: nodes,
+                key_points: heapless::Vec::new(),
+                tree: crate::mst::Tree::default(),
+                frame,
+                hull: heapless::Vec::new(),
+                midline: 0.0,
+                endpoints: Err(Error::Config("a template from parts has no endpoint rule")),
+            },
+            node_labels,
+            ends: None,
+            skeleton: RibSkeleton {
+                points: skeleton,
+                paths: Default::default(),
+                degree: [3; 4],
+            },
+            midline_fraction,
+        })
+    }
+}
+
 #[derive(Clone, Debug, PartialEq)]
 pub struct Registration {
     /// SOM / MST / endpoints of the target cloud.

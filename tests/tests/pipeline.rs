@@ -206,3 +206,53 @@ fn stretched_cage_is_refused_clearly_by_the_paper_model_and_built_by_the_guided_
         assert!(t.is_ok(), "cage({stretch}): {:?}", t.err());
     }
 }
+
+/// The compact template the controller receives (SOM-1 nodes + labels, frame, skeleton,
+/// sternum split) registers exactly like the template it was taken from.
+#[test]
+fn template_from_parts_registers_identically() {
+    let cfg = Config::improved();
+    let (ct, labels) = (cage(0.0), cage_labels(0.0));
+    let full = Template::build(&ct, Some(&labels), &cfg).unwrap();
+    let parts = Template::from_parts(
+        &full.graph.som1,
+        &full.node_labels,
+        full.graph.frame,
+        full.skeleton.points,
+        full.midline_fraction,
+    )
+    .unwrap();
+    let us = target();
+    let a = register(&full, &us, &cfg).unwrap();
+    let b = register(&parts, &us, &cfg).unwrap();
+    assert_eq!(a.skeleton.points, b.skeleton.points);
+    assert_eq!(a.pose, b.pose);
+    // Bad parts are refused.
+    let short = &full.node_labels[..full.node_labels.len() - 1];
+    assert!(Template::from_parts(
+        &full.graph.som1,
+        short,
+        full.graph.frame,
+        full.skeleton.points,
+        full.midline_fraction
+    )
+    .is_err());
+    let mut frame = full.graph.frame;
+    frame.axes[(0, 0)] = f32::NAN;
+    assert!(Template::from_parts(
+        &full.graph.som1,
+        &full.node_labels,
+        frame,
+        full.skeleton.points,
+        full.midline_fraction
+    )
+    .is_err());
+    assert!(Template::from_parts(
+        &full.graph.som1,
+        &full.node_labels,
+        full.graph.frame,
+        full.skeleton.points,
+        [2.0; 4]
+    )
+    .is_err());
+}
