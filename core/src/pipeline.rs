@@ -137,13 +137,12 @@ impl Template {
     }
 }
 
-/// A registration of a template onto one target.
 impl Template {
     /// A guided-model template from its compact parts, as the controller receives it
-    /// (`wire::TemplatePart`): the live SOM-1 nodes with their rib labels, the frame of the
+    /// (in chunks over the serial link): the live SOM-1 nodes with their rib labels, the frame of the
     /// template's key points, the 30 rib skeleton points and the sternum split of each
     /// rib. These are all [`register`] reads of a guided template; the graph's key points,
-    /// tree and hull are left empty. The parts are validated: 100..=400 finite nodes within
+    /// tree and hull are left empty. The parts are validated: 1..=400 finite nodes within
     /// range, one label each, a proper frame, finite skeleton points, fractions in [0, 1].
     pub fn from_parts(
         som1: &[Vec3],
@@ -208,6 +207,7 @@ impl Template {
     }
 }
 
+/// A registration of a template onto one target.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Registration {
     /// SOM / MST / endpoints of the target cloud.
