@@ -61,6 +61,7 @@ pub mod skeleton;
 pub mod som;
 pub mod temporal;
 pub mod track;
+pub mod wire;
 
 pub use error::{Error, Result, Stream};
 
