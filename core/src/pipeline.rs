@@ -6,7 +6,7 @@ use crate::error::{Cloud, Error, Result};
 use crate::geom::{nearest, validate, Frame, Rigid};
 use crate::guided::{fit_ribs, label_nodes, target_skeleton, NodeLabels};
 use crate::local_rigid::{LocalRigid, NEIGHBOURS};
-use crate::skeleton::{RibEnds, RibSkeleton, SkeletonGraph, TURN_ANGLE_DEG};
+use crate::skeleton::{GraphBuild, RibEnds, RibSkeleton, SkeletonGraph, TURN_ANGLE_DEG};
 use crate::som::SomConfig;
 use crate::Vec3;
 
@@ -225,8 +225,59 @@ pub struct Registration {
 /// Registers `template` onto the `target` cloud (any pose: no initial alignment needed).
 /// Map points through the result with [`LocalRigid::map_in_place`] on `.map`.
 pub fn register(template: &Template, target: &[Vec3], cfg: &Config) -> Result<Registration> {
-    validate(target, Cloud::Target, MIN_CLOUD_POINTS, MAX_CLOUD_POINTS)?;
-    let graph = SkeletonGraph::build(target, Cloud::Target, cfg, false)?;
+    let mut r = Registering::start(target, cfg)?;
+    loop {
+        if let Some(reg) = r.step(template, target, cfg, u32::MAX)? {
+            return Ok(reg);
+        }
+    }
+}
+
+/// A registration in progress, for callers that must bound the work per call (the
+/// controller's 100 Hz loop): the target's skeleton graph is built at most `budget` SOM
+/// iterations per [`Registering::step`] (a stage change is a call of its own), and the
+/// rib skeleton and mapping take one last call. The result equals [`register`]'s.
+pub struct Registering {
+    graph: GraphBuild,
+}
+
+impl Registering {
+    /// Validates the target and prepares its SOM 1 (principal axes, initial map).
+    pub fn start(target: &[Vec3], cfg: &Config) -> Result<Self> {
+        validate(target, Cloud::Target, MIN_CLOUD_POINTS, MAX_CLOUD_POINTS)?;
+        Ok(Registering {
+            graph: GraphBuild::start(target, Cloud::Target, cfg, false)?,
+        })
+    }
+
+    /// SOM iterations done and in all.
+    pub fn progress(&self, cfg: &Config) -> (u32, u32) {
+        self.graph.progress(cfg)
+    }
+
+    /// One bounded step; `Some(registration)` when done. `target` and `cfg` must be those
+    /// given to [`Registering::start`].
+    pub fn step(
+        &mut self,
+        template: &Template,
+        target: &[Vec3],
+        cfg: &Config,
+        budget: u32,
+    ) -> Result<Option<Registration>> {
+        match self.graph.step(target, cfg, budget)? {
+            None => Ok(None),
+            Some(graph) => finish(template, target, graph, cfg).map(Some),
+        }
+    }
+}
+
+/// The rib skeleton of the target (endpoint matching or guided) and the mapping.
+fn finish(
+    template: &Template,
+    target: &[Vec3],
+    graph: SkeletonGraph,
+    cfg: &Config,
+) -> Result<Registration> {
     let (pose, matching, skeleton) = match (cfg.rib_model, &template.ends) {
         (RibModel::Graph, Some(ends)) => {
             let matching = match_endpoints(&graph, &template.graph, ends)?;

@@ -38,7 +38,7 @@ use crate::geom::{Frame, Rigid};
 use crate::hull::{gift_wrap, Vec2};
 use crate::mst::Tree;
 use crate::pipeline::Config;
-use crate::som::Som;
+use crate::som::{Som, SomTrainer};
 use crate::Vec3;
 
 /// Capacity of SOM 1 (paper grid: 20 × 20 = 400 nodes; 400 × 12 B = 4.7 KiB).
@@ -86,28 +86,21 @@ impl SkeletonGraph {
     /// cloud is taken to be in the patient frame (x lateral, y cranial) and the axes are
     /// oriented to it (used for the template); otherwise their signs are arbitrary.
     pub fn build(cloud: &[Vec3], which: Cloud, cfg: &Config, patient_frame: bool) -> Result<Self> {
-        let (som1, som2) = (&cfg.som1, &cfg.som2);
-        let frame0 = Frame::principal(cloud, som1.seed).ok_or(Error::TooFewPoints {
-            cloud: which,
-            found: 0,
-            min: 1,
-        })?;
-        if frame0.spread[1].is_nan() || frame0.spread[1] < MIN_SPREAD_MM {
-            return Err(Error::Degenerate {
-                cloud: which,
-                spread_mm: frame0.spread[1],
-            });
+        let mut b = GraphBuild::start(cloud, which, cfg, patient_frame)?;
+        loop {
+            if let Some(graph) = b.step(cloud, cfg, u32::MAX)? {
+                return Ok(graph);
+            }
         }
-        let map1 = Som::<SOM1_CAPACITY>::train(cloud, &frame0, som1)?;
-        let mut live1 = heapless::Vec::new();
-        map1.live_nodes(cloud, som1.seed, &mut live1)?;
-        let frame1 = Frame::principal(&live1, som2.seed).ok_or(Error::Degenerate {
-            cloud: which,
-            spread_mm: 0.0,
-        })?;
-        let map2 = Som::<KEY_POINTS>::train(&live1, &frame1, som2)?;
-        let mut key_points = heapless::Vec::new();
-        map2.live_nodes(&live1, som2.seed, &mut key_points)?;
+    }
+
+    /// MST, hull, midline and endpoints of the trained key points.
+    fn from_key_points(
+        som1: heapless::Vec<Vec3, SOM1_CAPACITY>,
+        key_points: heapless::Vec<Vec3, KEY_POINTS>,
+        which: Cloud,
+        patient_frame: bool,
+    ) -> Result<Self> {
         if key_points.len() < MIN_KEY_POINTS {
             return Err(Error::Endpoints {
                 cloud: which,
@@ -136,7 +129,7 @@ impl SkeletonGraph {
         let midline = median_u(&uv);
         let endpoints = select_endpoints(&key_points, &tree, &uv, &hull, midline, which);
         Ok(SkeletonGraph {
-            som1: live1,
+            som1,
             key_points,
             tree,
             frame,
@@ -149,6 +142,101 @@ impl SkeletonGraph {
     /// Side of a key point: 0 below the midline, 1 above.
     pub fn side(&self, k: usize) -> usize {
         usize::from(self.frame.local(&self.key_points[k]).x > self.midline)
+    }
+}
+
+/// A [`SkeletonGraph`] being built a bounded number of SOM iterations at a time (the
+/// controller's incremental registration); [`SkeletonGraph::build`] runs it to the end.
+pub struct GraphBuild {
+    which: Cloud,
+    patient_frame: bool,
+    stage: GraphStage,
+}
+
+// The stages are exclusive and the enum lives once per registration: boxing is not an
+// option without a heap, and the size is the largest stage's anyway.
+#[allow(clippy::large_enum_variant)]
+enum GraphStage {
+    Som1(Som<SOM1_CAPACITY>, SomTrainer),
+    Som2(
+        heapless::Vec<Vec3, SOM1_CAPACITY>,
+        Som<KEY_POINTS>,
+        SomTrainer,
+    ),
+    Done,
+}
+
+impl GraphBuild {
+    /// Principal axes of `cloud` and the initialised SOM 1 (O(samples), no training).
+    pub fn start(cloud: &[Vec3], which: Cloud, cfg: &Config, patient_frame: bool) -> Result<Self> {
+        let frame0 = Frame::principal(cloud, cfg.som1.seed).ok_or(Error::TooFewPoints {
+            cloud: which,
+            found: 0,
+            min: 1,
+        })?;
+        if frame0.spread[1].is_nan() || frame0.spread[1] < MIN_SPREAD_MM {
+            return Err(Error::Degenerate {
+                cloud: which,
+                spread_mm: frame0.spread[1],
+            });
+        }
+        let (map, trainer) = Som::<SOM1_CAPACITY>::start(cloud, &frame0, &cfg.som1)?;
+        Ok(GraphBuild {
+            which,
+            patient_frame,
+            stage: GraphStage::Som1(map, trainer),
+        })
+    }
+
+    /// SOM iterations done and in all (for progress reports).
+    pub fn progress(&self, cfg: &Config) -> (u32, u32) {
+        let total = cfg.som1.iterations + cfg.som2.iterations;
+        match &self.stage {
+            GraphStage::Som1(_, t) => (t.done(), total),
+            GraphStage::Som2(_, _, t) => (cfg.som1.iterations + t.done(), total),
+            GraphStage::Done => (total, total),
+        }
+    }
+
+    /// At most `budget` SOM iterations (a stage change — dead-unit pruning, the SOM-2
+    /// initialisation, or MST/hull/endpoints at the end — counts as one call of its own);
+    /// `Some(graph)` when done. `cloud` and `cfg` must be those given to
+    /// [`GraphBuild::start`].
+    pub fn step(
+        &mut self,
+        cloud: &[Vec3],
+        cfg: &Config,
+        budget: u32,
+    ) -> Result<Option<SkeletonGraph>> {
+        let (som1, som2) = (&cfg.som1, &cfg.som2);
+        match core::mem::replace(&mut self.stage, GraphStage::Done) {
+            GraphStage::Som1(mut map, mut trainer) => {
+                if !trainer.run(&mut map, cloud, budget) {
+                    self.stage = GraphStage::Som1(map, trainer);
+                    return Ok(None);
+                }
+                let mut live1 = heapless::Vec::new();
+                map.live_nodes(cloud, som1.seed, &mut live1)?;
+                let frame1 = Frame::principal(&live1, som2.seed).ok_or(Error::Degenerate {
+                    cloud: self.which,
+                    spread_mm: 0.0,
+                })?;
+                let (map2, trainer2) = Som::<KEY_POINTS>::start(&live1, &frame1, som2)?;
+                self.stage = GraphStage::Som2(live1, map2, trainer2);
+                Ok(None)
+            }
+            GraphStage::Som2(live1, mut map, mut trainer) => {
+                if !trainer.run(&mut map, &live1, budget) {
+                    self.stage = GraphStage::Som2(live1, map, trainer);
+                    return Ok(None);
+                }
+                let mut key_points = heapless::Vec::new();
+                map.live_nodes(&live1, som2.seed, &mut key_points)?;
+                SkeletonGraph::from_key_points(live1, key_points, self.which, self.patient_frame)
+                    .map(Some)
+            }
+            GraphStage::Done => Err(Error::Config("the skeleton graph is already built")),
+        }
     }
 }
 

@@ -116,50 +116,27 @@ impl<const CAP: usize> Som<CAP> {
     /// Trains a map on `points` (any non-empty size; nothing is copied) with `frame` the
     /// principal axes of `points` (for the linear initialisation).
     pub fn train(points: &[Vec3], frame: &Frame, cfg: &SomConfig) -> Result<Self> {
+        let (mut som, mut trainer) = Self::start(points, frame, cfg)?;
+        trainer.run(&mut som, points, u32::MAX);
+        Ok(som)
+    }
+
+    /// The initialised map and its trainer, to train a bounded number of iterations at a
+    /// time ([`SomTrainer::run`]); the result is the same as [`Som::train`]'s.
+    pub fn start(points: &[Vec3], frame: &Frame, cfg: &SomConfig) -> Result<(Self, SomTrainer)> {
         cfg.check(CAP)?;
         if points.is_empty() {
             return Err(Error::Config("SOM needs a non-empty cloud"));
         }
-        let n = u32::try_from(points.len()).map_err(|_| Error::Config("cloud too large"))?;
-        let (rows, cols) = (cfg.rows, cfg.cols);
-        let mut som = Self::linear_init(frame, rows, cols)?;
-        let mut rng = Rng::new(cfg.seed);
-        let mut g_row = [0.0f32; MAX_GRID_SIDE];
-        let mut g_col = [0.0f32; MAX_GRID_SIDE];
-        let last = (cfg.iterations - 1).max(1) as f32;
-        let radius_ratio = libm::logf(cfg.radius_end / cfg.radius_start);
-        let lr_ratio = libm::logf(cfg.lr_end / cfg.lr_start);
-        for i in 0..cfg.iterations {
-            let t = i as f32 / last;
-            let sigma = cfg.radius_start * libm::expf(radius_ratio * t);
-            let lr = cfg.lr_start * libm::expf(lr_ratio * t);
-            let p = points[rng.below(n) as usize];
-            let (br, bc) = som.bmu(&p);
-            let reach = libm::ceilf(3.0 * sigma) as usize;
-            let inv = -0.5 / (sigma * sigma);
-            let (r0, r1) = (br.saturating_sub(reach), (br + reach).min(rows - 1));
-            let (c0, c1) = (bc.saturating_sub(reach), (bc + reach).min(cols - 1));
-            for (r, g) in g_row.iter_mut().enumerate().take(r1 + 1).skip(r0) {
-                let d = r.abs_diff(br) as f32;
-                *g = libm::expf(inv * d * d);
-            }
-            for (c, g) in g_col.iter_mut().enumerate().take(c1 + 1).skip(c0) {
-                let d = c.abs_diff(bc) as f32;
-                *g = lr * libm::expf(inv * d * d);
-            }
-            for (row, gr) in som
-                .nodes
-                .chunks_exact_mut(cols)
-                .skip(r0)
-                .take(r1 + 1 - r0)
-                .zip(&g_row[r0..=r1])
-            {
-                for (w, gc) in row[c0..=c1].iter_mut().zip(&g_col[c0..=c1]) {
-                    *w += (p - *w) * (gr * gc);
-                }
-            }
-        }
-        Ok(som)
+        let som = Self::linear_init(frame, cfg.rows, cfg.cols)?;
+        Ok((
+            som,
+            SomTrainer {
+                cfg: *cfg,
+                rng: Rng::new(cfg.seed),
+                done: 0,
+            },
+        ))
     }
 
     /// `rows × cols` nodes spread evenly over ±2σ of the first two principal axes.
@@ -235,6 +212,81 @@ impl<const CAP: usize> Som<CAP> {
     /// All nodes, row after row.
     pub fn nodes(&self) -> &[Vec3] {
         &self.nodes
+    }
+}
+
+/// The state of a map's training between bounded runs (see [`Som::start`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SomTrainer {
+    cfg: SomConfig,
+    rng: Rng,
+    done: u32,
+}
+
+impl SomTrainer {
+    /// Iterations done so far.
+    pub fn done(&self) -> u32 {
+        self.done
+    }
+
+    /// All iterations done.
+    pub fn finished(&self) -> bool {
+        self.done >= self.cfg.iterations
+    }
+
+    /// Runs at most `budget` more iterations on `som` with samples of `points` (the same
+    /// cloud on every call); returns whether training is finished.
+    pub fn run<const CAP: usize>(
+        &mut self,
+        som: &mut Som<CAP>,
+        points: &[Vec3],
+        budget: u32,
+    ) -> bool {
+        let cfg = &self.cfg;
+        // Note: `start` checked the cloud is non-empty; u32 indexing covers MAX_CLOUD_POINTS.
+        let n = points.len().min(u32::MAX as usize) as u32;
+        if n == 0 {
+            return self.finished();
+        }
+        let (rows, cols) = (cfg.rows, cfg.cols);
+        let mut g_row = [0.0f32; MAX_GRID_SIDE];
+        let mut g_col = [0.0f32; MAX_GRID_SIDE];
+        let last = (cfg.iterations - 1).max(1) as f32;
+        let radius_ratio = libm::logf(cfg.radius_end / cfg.radius_start);
+        let lr_ratio = libm::logf(cfg.lr_end / cfg.lr_start);
+        let end = self.done.saturating_add(budget).min(cfg.iterations);
+        for i in self.done..end {
+            let t = i as f32 / last;
+            let sigma = cfg.radius_start * libm::expf(radius_ratio * t);
+            let lr = cfg.lr_start * libm::expf(lr_ratio * t);
+            let p = points[self.rng.below(n) as usize];
+            let (br, bc) = som.bmu(&p);
+            let reach = libm::ceilf(3.0 * sigma) as usize;
+            let inv = -0.5 / (sigma * sigma);
+            let (r0, r1) = (br.saturating_sub(reach), (br + reach).min(rows - 1));
+            let (c0, c1) = (bc.saturating_sub(reach), (bc + reach).min(cols - 1));
+            for (r, g) in g_row.iter_mut().enumerate().take(r1 + 1).skip(r0) {
+                let d = r.abs_diff(br) as f32;
+                *g = libm::expf(inv * d * d);
+            }
+            for (c, g) in g_col.iter_mut().enumerate().take(c1 + 1).skip(c0) {
+                let d = c.abs_diff(bc) as f32;
+                *g = lr * libm::expf(inv * d * d);
+            }
+            for (row, gr) in som
+                .nodes
+                .chunks_exact_mut(cols)
+                .skip(r0)
+                .take(r1 + 1 - r0)
+                .zip(&g_row[r0..=r1])
+            {
+                for (w, gc) in row[c0..=c1].iter_mut().zip(&g_col[c0..=c1]) {
+                    *w += (p - *w) * (gr * gc);
+                }
+            }
+        }
+        self.done = end;
+        self.finished()
     }
 }
 

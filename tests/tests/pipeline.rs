@@ -256,3 +256,34 @@ fn template_from_parts_registers_identically() {
     )
     .is_err());
 }
+
+/// Registration in bounded steps (the controller's way) gives exactly `register`'s result.
+#[test]
+fn incremental_registration_equals_register() {
+    use ribreg_core::pipeline::Registering;
+    let labels = cage_labels(0.0);
+    for (cfg, labels) in [
+        (Config::improved(), Some(&labels[..])),
+        (Config::default(), None),
+    ] {
+        let template = Template::build(&cage(0.0), labels, &cfg).unwrap();
+        let us = target();
+        let whole = register(&template, &us, &cfg).unwrap();
+        let mut r = Registering::start(&us, &cfg).unwrap();
+        let mut calls = 0;
+        let stepped = loop {
+            calls += 1;
+            if let Some(reg) = r.step(&template, &us, &cfg, 7).unwrap() {
+                break reg;
+            }
+        };
+        assert_eq!(stepped, whole);
+        let total = cfg.som1.iterations + cfg.som2.iterations;
+        assert_eq!(r.progress(&cfg), (total, total));
+        assert!(calls as u32 >= total / 7, "{calls}");
+        assert!(
+            r.step(&template, &us, &cfg, 7).is_err(),
+            "no step after the end"
+        );
+    }
+}
