@@ -43,6 +43,7 @@
 //! only by [`pipeline::MAX_CLOUD_POINTS`].
 
 pub mod compound;
+pub mod controller;
 pub mod endpoints;
 pub mod error;
 pub mod example;

@@ -134,6 +134,19 @@ impl LocalRigid {
         ev[1] < MIN_CROSS_SPREAD * MIN_CROSS_SPREAD * ev[0]
     }
 
+    /// The transform that maps `p` and the RMS residual of its fit over its (widened)
+    /// neighbourhood, mm: how far the skeleton around `p` is from moving rigidly, a
+    /// quality figure for a mapped waypoint (lower is better).
+    pub fn transform_with_residual(&self, p: &Vec3) -> Result<(Rigid, f32)> {
+        let mask = self.widened(self.neighbourhood(p));
+        let t = self.fit(mask)?;
+        let mut sum = 0.0;
+        for i in bits(mask) {
+            sum += (t.apply(&self.source[i]) - self.target[i]).norm_squared();
+        }
+        Ok((t, libm::sqrtf(sum / mask.count_ones().max(1) as f32)))
+    }
+
     /// Fits the rigid transform of a neighbourhood.
     pub fn fit(&self, mask: u32) -> Result<Rigid> {
         let mut a = heapless::Vec::<Vec3, SKELETON_POINTS>::new();

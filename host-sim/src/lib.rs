@@ -4,6 +4,7 @@
 pub mod baselines;
 pub mod demo;
 pub mod eval;
+pub mod hil;
 pub mod io;
 pub mod phantom;
 pub mod plot;

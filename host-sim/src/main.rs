@@ -54,6 +54,28 @@ enum Command {
         #[command(subcommand)]
         sweep: Option<PhantomCommand>,
     },
+    /// Play the robot PC in a whole procedure against the controller (upload, sweep,
+    /// register, execute) and report where the probe ended up at each waypoint.
+    Hil {
+        /// Run the controller in this process instead of the emulator.
+        #[arg(long, conflicts_with = "port")]
+        in_process: bool,
+        /// Connect to a controller at HOST:PORT (a serial port exposed over TCP) instead
+        /// of starting the emulator.
+        #[arg(long)]
+        port: Option<String>,
+        /// Inject link faults (corrupted, dropped, duplicated, reordered frames, garbage).
+        #[arg(long)]
+        faults: bool,
+        /// Seed of the fault injection.
+        #[arg(long, default_value_t = 1)]
+        fault_seed: u64,
+        #[command(flatten)]
+        phantom: PhantomArgs,
+        /// Also write the report as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
     /// Calibrate the robotic US system.
     Calibrate {
         #[command(subcommand)]
@@ -226,6 +248,88 @@ fn read_lag_ms(path: &std::path::Path) -> Result<f64, CliError> {
         .ok_or_else(|| CliError::Usage(format!("{}: no number \"lag_ms\"", path.display())))
 }
 
+fn run_hil(
+    in_process: bool,
+    port: Option<String>,
+    faults: Option<u64>,
+    phantom: &PhantomConfig,
+    json: Option<PathBuf>,
+    progress: &mut dyn FnMut(&str),
+) -> Result<(), CliError> {
+    use ribreg_sim::hil::{self, Faults, Session};
+    let faults = faults.map(|seed| (Faults::DEFAULT, seed));
+    let report = if in_process || port.is_none() {
+        if !in_process {
+            return Err(CliError::Usage(
+                "the emulator run needs the firmware: use --in-process or --port HOST:PORT".into(),
+            ));
+        }
+        let mut session = Session::new(hil::InProcess::new(), faults);
+        hil::run(&mut session, phantom, progress)?
+    } else {
+        let addr = port.unwrap_or_default();
+        let stream = std::net::TcpStream::connect(&addr)
+            .map_err(|e| CliError::Usage(format!("{addr}: cannot connect: {e}")))?;
+        let _ = stream.set_nodelay(true);
+        let mut session = Session::new(hil::Stream::new(stream), faults);
+        hil::run(&mut session, phantom, progress)?
+    };
+    print_hil(&report);
+    if let Some(path) = json {
+        let text =
+            serde_json::to_string_pretty(&report).map_err(|e| CliError::Usage(e.to_string()))?;
+        ribreg_sim::io::write_text(&path, &text)?;
+    }
+    let worst = report.max_error();
+    if worst > hil::TOLERANCE_MM
+        || report.applied[0] != report.applied[2]
+        || report.applied[1] != report.applied[3]
+    {
+        return Err(CliError::Usage(format!(
+            "procedure out of tolerance or inconsistent: worst waypoint {worst:.2} mm (tolerance {} mm), \
+             applied poses {}/{} frames {}/{}",
+            hil::TOLERANCE_MM,
+            report.applied[0],
+            report.applied[2],
+            report.applied[1],
+            report.applied[3]
+        )));
+    }
+    Ok(())
+}
+
+fn print_hil(r: &ribreg_sim::hil::HilReport) {
+    println!("waypoint  mapped (x, y, z) mm               quality  probe error");
+    for (i, w) in r.waypoints.iter().enumerate() {
+        println!(
+            "{i:>8}  ({:8.2}, {:8.2}, {:8.2})  {:6.2} mm  {:6.2} mm",
+            w.mapped[0], w.mapped[1], w.mapped[2], w.quality_mm, w.error_mm
+        );
+    }
+    let mean =
+        r.waypoints.iter().map(|w| w.error_mm).sum::<f64>() / r.waypoints.len().max(1) as f64;
+    println!(
+        "hil: {} waypoints, probe error mean {mean:.2} mm, max {:.2} mm (tolerance {} mm); lag {:.1} ms; \
+         {} points compounded; applied poses {}/{}, frames {}/{}; link: {} frames sent, {} re-sent, \
+         {} NACKs, {} timeouts, faults injected {:?}; {:.1} s",
+        r.waypoints.len(),
+        r.max_error(),
+        ribreg_sim::hil::TOLERANCE_MM,
+        r.lag_ms,
+        r.points,
+        r.applied[0],
+        r.applied[2],
+        r.applied[1],
+        r.applied[3],
+        r.link.sent,
+        r.link.resent,
+        r.link.nacks,
+        r.link.timeouts,
+        r.link.injected,
+        r.wall_s
+    );
+}
+
 fn run_phantom_sweep(
     phantom: &PhantomConfig,
     cfg: &SweepConfig,
@@ -327,6 +431,14 @@ fn main() -> ExitCode {
             }),
             ..
         } => run_phantom_sweep(&phantom.config(), &sweep.config(), &out_dir, &mut progress),
+        Command::Hil {
+            in_process,
+            port,
+            faults,
+            fault_seed,
+            phantom,
+            json,
+        } => run_hil(in_process, port, faults.then_some(fault_seed), &phantom.config(), json, &mut progress),
         Command::Calibrate {
             kind:
                 CalibrateCommand::Temporal {

@@ -186,6 +186,40 @@ pub struct RegisterOutcome {
     pub registration: Box<Registration>,
 }
 
+/// The template `method` registers with: the whole cloud for the paper's method; for the
+/// improved one, only its probe-facing points ([`prep::anterior_mask`]), labels needed.
+pub fn build_template(
+    template: &[Vec3],
+    labels: Option<&[u8]>,
+    method: Method,
+    progress: &mut dyn FnMut(&str),
+) -> Result<Template, Error> {
+    let cfg = &method.config();
+    match method {
+        Method::Paper => Template::build(template, labels, cfg),
+        Method::Improved => {
+            let mask = prep::anterior_mask(template);
+            let keep = |i: usize| mask[i];
+            let front: Vec<Vec3> = (0..template.len())
+                .filter(|&i| keep(i))
+                .map(|i| template[i])
+                .collect();
+            let front_labels: Option<Vec<u8>> = labels.map(|l| {
+                (0..l.len().min(mask.len()))
+                    .filter(|&i| keep(i))
+                    .map(|i| l[i])
+                    .collect()
+            });
+            progress(&format!(
+                "template: {} of {} points face the probe",
+                front.len(),
+                template.len()
+            ));
+            Template::build(&front, front_labels.as_deref(), cfg)
+        }
+    }
+}
+
 /// Registers already-loaded clouds (no file I/O): the shared core of `register` and
 /// `demo`. `progress` receives one line per stage.
 pub fn register_clouds(
@@ -198,31 +232,7 @@ pub fn register_clouds(
 ) -> Result<RegisterOutcome, Error> {
     let cfg = &method.config();
     let t0 = Instant::now();
-    let tpl = match method {
-        Method::Paper => Template::build(template, labels, cfg)?,
-        Method::Improved => {
-            let mask = prep::anterior_mask(template);
-            let front: Vec<Vec3> = template
-                .iter()
-                .zip(&mask)
-                .filter(|(_, m)| **m)
-                .map(|(p, _)| *p)
-                .collect();
-            let front_labels: Option<Vec<u8>> = labels.map(|l| {
-                l.iter()
-                    .zip(&mask)
-                    .filter(|(_, m)| **m)
-                    .map(|(l, _)| *l)
-                    .collect()
-            });
-            progress(&format!(
-                "template: {} of {} points face the probe",
-                front.len(),
-                template.len()
-            ));
-            Template::build(&front, front_labels.as_deref(), cfg)?
-        }
-    };
+    let tpl = build_template(template, labels, method, progress)?;
     let t_template = t0.elapsed();
     progress(&format!(
         "template: skeleton from {} SOM-1 nodes, {} key points -> 30 rib points ({:.1} ms)",

@@ -1,0 +1,873 @@
+//! The probe-positioning controller: the state machine the firmware runs, host-testable.
+//!
+//! ```text
+//! Idle ──(Configure + template + waypoints)──▶ TemplateLoaded ──StartSweep──▶ Sweeping
+//!   ▲                                            ▲      │                      │ EndSweep
+//!   │                                            │      └──────Register◀───────┘ (cloud kept)
+//!   │ Abort (from anywhere: back to             │              ▼
+//!   │ TemplateLoaded, or Idle without a          │         Registering ──(bounded steps)──▶ Ready
+//!   │ template)                                  └──── Done ◀── Executing ◀──Execute──────┘
+//! ```
+//!
+//! * **Link**: [`Controller::receive`] takes one decoded-or-failed frame; every host
+//!   message is sequenced (see [`crate::wire`]): the expected one is applied and ACKed,
+//!   a duplicate gets its first reply again and is not re-applied, a skipped number or a
+//!   corrupt frame is NACKed with the number expected. A message received intact but
+//!   refused (wrong state, bad content) is NACKed with its own number and
+//!   [`NackCode::BadState`] / [`NackCode::Invalid`]: it counts as handled, the host must
+//!   not re-send it.
+//! * **Sweep**: poses and frames go into a [`Compounder`] (lag-corrected poses).
+//! * **Registration** runs in [`Controller::poll`], [`SOM_ITERATIONS_PER_POLL`] SOM
+//!   iterations per call, so pose handling between calls is never starved; the mapped
+//!   waypoints become probe targets (on the skin side of the local bone surface, beam
+//!   along its inward normal, footprint along the gap) and are reported with a quality
+//!   figure (the local rigid fit's RMS residual).
+//! * **Execution**: setpoints every [`SETPOINT_PERIOD_US`] along straight segments with
+//!   a trapezoidal speed profile (configured speed and acceleration limits), a dwell of
+//!   [`DWELL_US`] at each target; if no robot pose arrived for more than
+//!   [`POSE_TIMEOUT_US`], setpoints stop and [`Fault::PoseTimeout`] is reported once; they
+//!   resume, from where they stopped, when poses do.
+//!
+//! Time is the caller's monotonic clock in µs (`now_us`). Nothing allocates or panics on
+//! input; replies wait in a bounded outbox ([`Controller::next_reply`]).
+
+use crate::compound::{Compounder, DEFAULT_MAX_COARSENINGS};
+use crate::error::{Error, Result};
+use crate::geom::Rigid;
+use crate::pipeline::{Config, Registering, Registration, Template, MIN_CLOUD_POINTS};
+use crate::probe::{Calibration, ProbeModel};
+use crate::skeleton::{SKELETON_POINTS, SOM1_CAPACITY};
+use crate::track::{TrackedPose, TRACK_CAPACITY};
+use crate::wire::{
+    error_code, Command, Configure, FrameError, FromController, NackCode, PoseW, SetpointW, State,
+    StatusW, TemplateShape, ToController, WaypointW, MAGIC, MAX_FRAME, MAX_WAYPOINTS,
+    PIXEL_SUBDIVISIONS, VERSION,
+};
+use crate::Vec3;
+use nalgebra::{Matrix3, Rotation3, SymmetricEigen, UnitQuaternion};
+
+/// Robot poses may pause this long while executing before setpoints stop, µs.
+pub const POSE_TIMEOUT_US: u64 = 50_000;
+/// Setpoint period while executing, µs (100 Hz).
+pub const SETPOINT_PERIOD_US: u64 = 10_000;
+/// Time the probe rests at each target, µs.
+pub const DWELL_US: u64 = 500_000;
+/// SOM iterations per registration step. One iteration of SOM 1 costs about 12,000
+/// instructions on the Cortex-M4F (BMU search over 400 nodes and the neighbourhood
+/// update), so 8 keep a step near 0.1 M instructions (README, "Controller").
+pub const SOM_ITERATIONS_PER_POLL: u32 = 8;
+/// Replies waiting to be sent: a poll emits at most one setpoint or fault and the
+/// results, a received frame one reply; 32 covers a whole result (≤ 32 waypoints).
+pub const OUTBOX: usize = 40;
+/// Replies remembered for duplicates (a re-sent frame gets its first reply again).
+const RECENT: usize = 16;
+/// Radius of the bone-surface patch whose principal axes orient a probe target, mm.
+pub const PATCH_RADIUS_MM: f32 = 12.0;
+/// Fewest cloud points in the patch; below it the probe axis points straight at the
+/// sweep's mean probe position.
+const MIN_PATCH_POINTS: usize = 6;
+
+/// A probe target: where the TCP goes for one mapped waypoint.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ProbeTarget {
+    /// The mapped waypoint (on the bone surface level), base frame, mm.
+    pub waypoint: Vec3,
+    /// TCP pose: on the skin side at the configured standoff, beam along the inward
+    /// surface normal.
+    pub tcp: Rigid,
+    /// Quality: RMS residual of the local rigid fit that mapped the waypoint, mm.
+    pub quality_mm: f32,
+}
+
+/// Sweep, calibration and motion settings (from [`Configure`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Settings {
+    calibration: Calibration,
+    lag_s: f64,
+    voxel_mm: f32,
+    max_speed: f32,
+    max_accel: f32,
+    standoff: f32,
+}
+
+/// One straight move with a trapezoidal speed profile, then a dwell.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Segment {
+    from: Rigid,
+    to: Rigid,
+    start_us: u64,
+    target: u8,
+}
+
+/// The controller (see the module docs). `VOXELS` is the compounding cloud's capacity.
+pub struct Controller<const VOXELS: usize> {
+    state: State,
+    connected: bool,
+    expected: u16,
+    out_seq: u16,
+    outbox: heapless::Deque<(u16, FromController), OUTBOX>,
+    recent: heapless::Deque<(u16, FromController), RECENT>,
+    /// Replies dropped because the outbox was full.
+    pub dropped_replies: u32,
+    settings: Option<Settings>,
+    nodes: heapless::Vec<Vec3, SOM1_CAPACITY>,
+    labels: heapless::Vec<u8, SOM1_CAPACITY>,
+    nodes_total: u16,
+    template: Option<Template>,
+    waypoints: heapless::Vec<Vec3, MAX_WAYPOINTS>,
+    waypoints_total: u8,
+    sweep: Option<Compounder<TRACK_CAPACITY, VOXELS>>,
+    cloud_ready: bool,
+    probe_sum: Vec3,
+    probe_count: u32,
+    registering: Option<Registering>,
+    registration: Option<Registration>,
+    targets: heapless::Vec<ProbeTarget, MAX_WAYPOINTS>,
+    last_pose: Option<(u64, Rigid)>,
+    poses: u32,
+    segment: Option<Segment>,
+    next_setpoint_us: u64,
+    paused_since: Option<u64>,
+    waypoint: u8,
+}
+
+impl<const VOXELS: usize> Default for Controller<VOXELS> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const VOXELS: usize> Controller<VOXELS> {
+    /// A controller waiting for the handshake.
+    pub const fn new() -> Self {
+        Controller {
+            state: State::Idle,
+            connected: false,
+            expected: 0,
+            out_seq: 0,
+            outbox: heapless::Deque::new(),
+            recent: heapless::Deque::new(),
+            dropped_replies: 0,
+            settings: None,
+            nodes: heapless::Vec::new(),
+            labels: heapless::Vec::new(),
+            nodes_total: 0,
+            template: None,
+            waypoints: heapless::Vec::new(),
+            waypoints_total: 0,
+            sweep: None,
+            cloud_ready: false,
+            probe_sum: Vec3::new(0.0, 0.0, 0.0),
+            probe_count: 0,
+            registering: None,
+            registration: None,
+            targets: heapless::Vec::new(),
+            last_pose: None,
+            poses: 0,
+            segment: None,
+            next_setpoint_us: 0,
+            paused_since: None,
+            waypoint: 0,
+        }
+    }
+
+    /// The current state.
+    pub fn state(&self) -> State {
+        self.state
+    }
+
+    /// The probe targets of the last registration.
+    pub fn targets(&self) -> &[ProbeTarget] {
+        &self.targets
+    }
+
+    /// The compounded cloud once the sweep has ended (robot base frame).
+    pub fn cloud(&mut self) -> Option<&[Vec3]> {
+        match (&mut self.sweep, self.cloud_ready) {
+            (Some(s), true) => Some(s.cloud.finish()),
+            _ => None,
+        }
+    }
+
+    /// The next reply to send, with its sequence number.
+    pub fn next_reply(&mut self) -> Option<(u16, FromController)> {
+        self.outbox.pop_front()
+    }
+
+    fn send(&mut self, msg: FromController) {
+        let seq = self.out_seq;
+        self.out_seq = self.out_seq.wrapping_add(1);
+        if self.outbox.push_back((seq, msg)).is_err() {
+            self.dropped_replies = self.dropped_replies.saturating_add(1);
+        }
+    }
+
+    /// A reply to host message `seq`, remembered for duplicates.
+    fn reply(&mut self, seq: u16, msg: FromController) {
+        if self.recent.is_full() {
+            self.recent.pop_front();
+        }
+        let _ = self.recent.push_back((seq, msg));
+        self.send(msg);
+    }
+
+    /// Handles one frame from the link: its bytes (without the delimiter, decoded in
+    /// place) or the receiver's error.
+    pub fn receive(&mut self, frame: core::result::Result<&mut [u8], FrameError>, now_us: u64) {
+        let decoded = frame.and_then(crate::wire::decode::<ToController>);
+        let (seq, msg) = match decoded {
+            Ok(m) => m,
+            Err(e) => {
+                let code = if e == FrameError::TooLong {
+                    NackCode::TooLong
+                } else {
+                    NackCode::Corrupt
+                };
+                self.send(FromController::Nack {
+                    seq: self.expected,
+                    code,
+                });
+                return;
+            }
+        };
+        if let ToController::Hello { magic, version } = msg {
+            if seq == 0 && magic == MAGIC && version == VERSION {
+                self.connected = true;
+                self.expected = 1;
+                self.recent.clear();
+                self.reply(
+                    0,
+                    FromController::HelloAck {
+                        magic: MAGIC,
+                        version: VERSION,
+                        max_frame: MAX_FRAME as u16,
+                    },
+                );
+            } else {
+                self.send(FromController::Nack {
+                    seq,
+                    code: NackCode::Version,
+                });
+            }
+            return;
+        }
+        if !self.connected {
+            self.send(FromController::Nack {
+                seq,
+                code: NackCode::Version,
+            });
+            return;
+        }
+        if seq != self.expected {
+            // Behind the expected number (within half the space): a duplicate.
+            if self.expected.wrapping_sub(seq) <= 0x8000 {
+                let first = self.recent.iter().find(|(s, _)| *s == seq).map(|(_, m)| *m);
+                self.send(first.unwrap_or(FromController::Ack { seq }));
+            } else {
+                self.send(FromController::Nack {
+                    seq: self.expected,
+                    code: NackCode::OutOfOrder,
+                });
+            }
+            return;
+        }
+        self.expected = self.expected.wrapping_add(1);
+        let reply = match self.apply(msg, now_us) {
+            Ok(()) => FromController::Ack { seq },
+            Err(code) => FromController::Nack { seq, code },
+        };
+        self.reply(seq, reply);
+    }
+
+    fn require(&self, allowed: &[State]) -> core::result::Result<(), NackCode> {
+        if allowed.contains(&self.state) {
+            Ok(())
+        } else {
+            Err(NackCode::BadState)
+        }
+    }
+
+    fn apply(&mut self, msg: ToController, now_us: u64) -> core::result::Result<(), NackCode> {
+        use State::*;
+        let invalid = |e: Error| NackCode::Invalid(error_code(&e));
+        let setup = [Idle, TemplateLoaded, Ready, Done];
+        match msg {
+            ToController::Hello { .. } => Ok(()),
+            ToController::Configure(c) => {
+                self.require(&setup)?;
+                self.settings = Some(settings(&c).map_err(invalid)?);
+                self.update_loaded();
+                Ok(())
+            }
+            ToController::TemplateNodes {
+                offset,
+                total,
+                nodes,
+            } => {
+                self.require(&setup)?;
+                if offset == 0 {
+                    self.nodes.clear();
+                    self.labels.clear();
+                    self.template = None;
+                    self.update_loaded();
+                }
+                let fits = usize::from(total) <= SOM1_CAPACITY
+                    && usize::from(offset) == self.nodes.len()
+                    && usize::from(offset) + nodes.len() <= usize::from(total)
+                    && (offset == 0 || total == self.nodes_total);
+                if !fits {
+                    return Err(invalid(Error::Capacity {
+                        capacity: SOM1_CAPACITY as u32,
+                    }));
+                }
+                self.nodes_total = total;
+                for n in &nodes {
+                    // Note: `fits` bounded the count by SOM1_CAPACITY.
+                    let _ = self.nodes.push(Vec3::from(n.p));
+                    let _ = self.labels.push(n.label);
+                }
+                Ok(())
+            }
+            ToController::TemplateShape(shape) => {
+                self.require(&setup)?;
+                if self.nodes.len() != usize::from(self.nodes_total) || self.nodes.is_empty() {
+                    return Err(invalid(Error::TooFewPoints {
+                        cloud: crate::error::Cloud::Template,
+                        found: self.nodes.len() as u32,
+                        min: u32::from(self.nodes_total.max(1)),
+                    }));
+                }
+                self.template = Some(template(&self.nodes, &self.labels, &shape).map_err(invalid)?);
+                self.update_loaded();
+                Ok(())
+            }
+            ToController::Waypoints {
+                offset,
+                total,
+                points,
+            } => {
+                self.require(&setup)?;
+                if offset == 0 {
+                    self.waypoints.clear();
+                }
+                let fits = usize::from(total) <= MAX_WAYPOINTS
+                    && usize::from(offset) == self.waypoints.len()
+                    && usize::from(offset) + points.len() <= usize::from(total)
+                    && (offset == 0 || total == self.waypoints_total);
+                if !fits {
+                    return Err(invalid(Error::Capacity {
+                        capacity: MAX_WAYPOINTS as u32,
+                    }));
+                }
+                if let Some(i) = points.iter().position(|p| !finite(p)) {
+                    return Err(invalid(Error::NonFinite {
+                        cloud: crate::error::Cloud::Query,
+                        index: u32::from(offset) + i as u32,
+                    }));
+                }
+                self.waypoints_total = total;
+                for p in &points {
+                    let _ = self.waypoints.push(Vec3::from(*p));
+                }
+                self.update_loaded();
+                Ok(())
+            }
+            ToController::Pose(p) => self.pose(&p, now_us).map_err(invalid),
+            ToController::Frame(f) => {
+                self.require(&[Sweeping])?;
+                let mut pixels = [[0.0f32; 2]; crate::wire::MAX_FRAME_PIXELS];
+                for (o, p) in pixels.iter_mut().zip(&f.pixels) {
+                    *o = [
+                        f32::from(p[0]) / PIXEL_SUBDIVISIONS,
+                        f32::from(p[1]) / PIXEL_SUBDIVISIONS,
+                    ];
+                }
+                let sweep = self.sweep.as_mut().ok_or(NackCode::BadState)?;
+                sweep
+                    .add_frame(f.t_us as f64 * 1e-6, &pixels[..f.pixels.len()])
+                    .map(|_| ())
+                    .map_err(invalid)
+            }
+            ToController::Command(c) => self.command(c, now_us),
+        }
+    }
+
+    /// TemplateLoaded once configuration, template and all waypoints are in.
+    fn update_loaded(&mut self) {
+        let loaded = self.settings.is_some()
+            && self.template.is_some()
+            && !self.waypoints.is_empty()
+            && self.waypoints.len() == usize::from(self.waypoints_total);
+        match (self.state, loaded) {
+            (State::Idle, true) => self.state = State::TemplateLoaded,
+            (State::TemplateLoaded | State::Ready | State::Done, false) => self.state = State::Idle,
+            _ => {}
+        }
+    }
+
+    fn pose(&mut self, p: &PoseW, now_us: u64) -> Result<()> {
+        let pose = TrackedPose::new(p.t_us as f64 * 1e-6, Vec3::from(p.position), p.quat)?;
+        if let Some(sweep) = &mut self.sweep {
+            if self.state == State::Sweeping {
+                sweep.add_pose(pose)?;
+                if let Some(s) = &self.settings {
+                    let tcp = pose.to_rigid().after(&s.calibration.ee_t_tcp);
+                    self.probe_sum += tcp.translation;
+                    self.probe_count += 1;
+                }
+            }
+        }
+        self.last_pose = Some((now_us, pose.to_rigid()));
+        self.poses = self.poses.saturating_add(1);
+        Ok(())
+    }
+
+    fn command(&mut self, c: Command, now_us: u64) -> core::result::Result<(), NackCode> {
+        use State::*;
+        let invalid = |e: Error| NackCode::Invalid(error_code(&e));
+        match c {
+            Command::StartSweep => {
+                self.require(&[TemplateLoaded, Ready, Done])?;
+                // Note(unwrap-free): TemplateLoaded implies settings.
+                let s = self.settings.ok_or(NackCode::BadState)?;
+                self.sweep = Some(
+                    Compounder::new(s.calibration, s.lag_s, s.voxel_mm, DEFAULT_MAX_COARSENINGS)
+                        .map_err(invalid)?,
+                );
+                self.cloud_ready = false;
+                self.probe_sum = Vec3::zeros();
+                self.probe_count = 0;
+                self.registration = None;
+                self.targets.clear();
+                self.state = Sweeping;
+                Ok(())
+            }
+            Command::EndSweep => {
+                self.require(&[Sweeping])?;
+                if let Some(s) = &mut self.sweep {
+                    s.cloud.finish();
+                }
+                self.cloud_ready = true;
+                self.state = TemplateLoaded;
+                Ok(())
+            }
+            Command::Register => {
+                self.require(&[TemplateLoaded])?;
+                let cloud = match (&mut self.sweep, self.cloud_ready) {
+                    (Some(s), true) => s.cloud.finish(),
+                    _ => return Err(NackCode::BadState),
+                };
+                if cloud.len() < MIN_CLOUD_POINTS {
+                    return Err(invalid(Error::TooFewPoints {
+                        cloud: crate::error::Cloud::Target,
+                        found: cloud.len() as u32,
+                        min: MIN_CLOUD_POINTS as u32,
+                    }));
+                }
+                self.registering = Some(
+                    crate::pipeline::Registering::start(cloud, &Config::improved())
+                        .map_err(invalid)?,
+                );
+                self.state = Registering;
+                Ok(())
+            }
+            Command::Execute => {
+                self.require(&[Ready, Done])?;
+                let (_, flange) = self.last_pose.ok_or(NackCode::BadState)?;
+                let s = self.settings.ok_or(NackCode::BadState)?;
+                let first = self.targets.first().ok_or(NackCode::BadState)?.tcp;
+                self.segment = Some(Segment {
+                    from: flange.after(&s.calibration.ee_t_tcp),
+                    to: first,
+                    start_us: now_us,
+                    target: 0,
+                });
+                self.waypoint = 0;
+                self.next_setpoint_us = now_us;
+                self.paused_since = None;
+                self.state = Executing;
+                Ok(())
+            }
+            Command::Abort => {
+                self.registering = None;
+                self.segment = None;
+                self.paused_since = None;
+                self.state = Idle;
+                self.update_loaded();
+                Ok(())
+            }
+            Command::Status => {
+                self.send(FromController::Status(self.status()));
+                Ok(())
+            }
+            Command::Result => {
+                self.require(&[Ready, Executing, Done])?;
+                for i in 0..self.targets.len() {
+                    let t = self.targets[i];
+                    self.send(FromController::Waypoint(WaypointW {
+                        index: i as u8,
+                        total: self.targets.len() as u8,
+                        position: t.waypoint.into(),
+                        quality_mm: t.quality_mm,
+                    }));
+                }
+                Ok(())
+            }
+        }
+    }
+
+    /// Current status.
+    pub fn status(&self) -> StatusW {
+        let (placed, refused, points) = self.sweep.as_ref().map_or((0, 0, 0), |s| {
+            (
+                s.frames.placed,
+                s.frames.outside_track.saturating_add(s.frames.invalid),
+                s.cloud.len().min(usize::from(u16::MAX)) as u16,
+            )
+        });
+        let progress = match (&self.registering, self.state) {
+            (Some(r), State::Registering) => {
+                let (done, total) = r.progress(&Config::improved());
+                (u64::from(done) * 100 / u64::from(total.max(1))) as u8
+            }
+            (_, State::Ready | State::Executing | State::Done) => 100,
+            _ => 0,
+        };
+        StatusW {
+            state: self.state,
+            expected_seq: self.expected,
+            poses: self.poses,
+            frames_placed: placed,
+            frames_refused: refused,
+            points,
+            progress,
+            waypoint: self.waypoint,
+        }
+    }
+
+    /// The periodic work: one bounded registration step, setpoints, the pose watchdog.
+    /// Call it at least every [`SETPOINT_PERIOD_US`].
+    pub fn poll(&mut self, now_us: u64) {
+        match self.state {
+            State::Registering => self.register_step(),
+            State::Executing => self.execute(now_us),
+            _ => {}
+        }
+    }
+
+    fn register_step(&mut self) {
+        let cfg = Config::improved();
+        let (Some(r), Some(template), Some(sweep)) =
+            (&mut self.registering, &self.template, &mut self.sweep)
+        else {
+            self.state = State::TemplateLoaded;
+            return;
+        };
+        let cloud = sweep.cloud.finish();
+        match r.step(template, cloud, &cfg, SOM_ITERATIONS_PER_POLL) {
+            Ok(None) => {}
+            Ok(Some(reg)) => {
+                self.registering = None;
+                match self.targets_from(&reg) {
+                    Ok(()) => {
+                        self.registration = Some(reg);
+                        self.state = State::Ready;
+                        let _ = self.command(Command::Result, 0);
+                    }
+                    Err(e) => self.fail(e),
+                }
+            }
+            Err(e) => {
+                self.registering = None;
+                self.fail(e);
+            }
+        }
+    }
+
+    fn fail(&mut self, e: Error) {
+        self.state = State::TemplateLoaded;
+        self.send(FromController::Fault(crate::wire::Fault::Registration(
+            error_code(&e),
+        )));
+    }
+
+    /// Maps the waypoints and turns them into probe targets.
+    fn targets_from(&mut self, reg: &Registration) -> Result<()> {
+        let s = self.settings.ok_or(Error::Config("no configuration"))?;
+        let skin = if self.probe_count > 0 {
+            self.probe_sum / self.probe_count as f32
+        } else {
+            Vec3::zeros()
+        };
+        let cloud: &[Vec3] = match &mut self.sweep {
+            Some(sw) => sw.cloud.finish(),
+            None => &[],
+        };
+        let mut targets = heapless::Vec::new();
+        for w in &self.waypoints {
+            let (t, quality_mm) = reg.map.transform_with_residual(w)?;
+            let p = t.apply(w);
+            let tcp = probe_pose(cloud, &p, &skin, s.standoff);
+            // Note: at most MAX_WAYPOINTS waypoints, the capacity.
+            let _ = targets.push(ProbeTarget {
+                waypoint: p,
+                tcp,
+                quality_mm,
+            });
+        }
+        self.targets = targets;
+        Ok(())
+    }
+
+    fn execute(&mut self, now_us: u64) {
+        let fresh = self
+            .last_pose
+            .is_some_and(|(at, _)| now_us.saturating_sub(at) <= POSE_TIMEOUT_US);
+        if !fresh {
+            if self.paused_since.is_none() {
+                self.paused_since = Some(now_us);
+                self.send(FromController::Fault(crate::wire::Fault::PoseTimeout));
+            }
+            return;
+        }
+        if let Some(since) = self.paused_since.take() {
+            // Resume where the setpoints stopped: the profile clock skips the pause.
+            if let Some(seg) = &mut self.segment {
+                seg.start_us = seg.start_us.saturating_add(now_us.saturating_sub(since));
+            }
+            self.next_setpoint_us = now_us;
+        }
+        if now_us < self.next_setpoint_us {
+            return;
+        }
+        self.next_setpoint_us = now_us.saturating_add(SETPOINT_PERIOD_US);
+        let (Some(seg), Some(s)) = (self.segment, self.settings) else {
+            return;
+        };
+        let d = (seg.to.translation - seg.from.translation).norm();
+        let move_us = trapezoid_duration_us(d, s.max_speed, s.max_accel);
+        let elapsed = now_us.saturating_sub(seg.start_us);
+        let pose = if elapsed >= move_us {
+            seg.to
+        } else {
+            let travelled = trapezoid_distance(elapsed as f32 * 1e-6, d, s.max_speed, s.max_accel);
+            interpolate(
+                &seg.from,
+                &seg.to,
+                if d > 0.0 { travelled / d } else { 1.0 },
+            )
+        };
+        self.waypoint = seg.target;
+        let q =
+            UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(pose.rotation));
+        self.send(FromController::Setpoint(SetpointW {
+            t_us: now_us,
+            position: pose.translation.into(),
+            quat: [q.w, q.i, q.j, q.k],
+            waypoint: seg.target,
+        }));
+        if elapsed >= move_us.saturating_add(DWELL_US) {
+            let next = usize::from(seg.target) + 1;
+            match self.targets.get(next) {
+                Some(t) => {
+                    self.segment = Some(Segment {
+                        from: seg.to,
+                        to: t.tcp,
+                        start_us: now_us,
+                        target: next as u8,
+                    });
+                }
+                None => {
+                    self.segment = None;
+                    self.state = State::Done;
+                }
+            }
+        }
+    }
+}
+
+fn finite(p: &[f32; 3]) -> bool {
+    p.iter()
+        .all(|v| v.is_finite() && v.abs() <= crate::MAX_COORD_MM)
+}
+
+fn rigid(w: &[f32; 12]) -> Rigid {
+    Rigid {
+        rotation: Matrix3::from_row_slice(&w[..9]),
+        translation: Vec3::new(w[9], w[10], w[11]),
+    }
+}
+
+fn settings(c: &Configure) -> Result<Settings> {
+    let calibration = Calibration {
+        probe: ProbeModel {
+            width_px: c.probe.width_px,
+            height_px: c.probe.height_px,
+            footprint_mm: c.probe.footprint_mm,
+            depth_mm: c.probe.depth_mm,
+        },
+        tcp_t_us: rigid(&c.tcp_t_us),
+        ee_t_tcp: rigid(&c.ee_t_tcp),
+    };
+    calibration.validate()?;
+    let positive = |v: f32| v.is_finite() && v > 0.0 && v <= 1e4;
+    if !positive(c.max_speed_mm_s) || !positive(c.max_accel_mm_s2) {
+        return Err(Error::Config(
+            "speed and acceleration limits must be positive",
+        ));
+    }
+    if !(c.standoff_mm.is_finite() && (0.0..=200.0).contains(&c.standoff_mm)) {
+        return Err(Error::Config("standoff must be within 0..=200 mm"));
+    }
+    if !(crate::compound::MIN_VOXEL_MM..=100.0).contains(&c.voxel_mm) {
+        return Err(Error::Config("voxel size must be between 0.1 and 100 mm"));
+    }
+    if c.lag_us.unsigned_abs() > 10_000_000 {
+        return Err(Error::Config("lag must be within ±10 s"));
+    }
+    Ok(Settings {
+        calibration,
+        lag_s: f64::from(c.lag_us) * 1e-6,
+        voxel_mm: c.voxel_mm,
+        max_speed: c.max_speed_mm_s,
+        max_accel: c.max_accel_mm_s2,
+        standoff: c.standoff_mm,
+    })
+}
+
+fn template(nodes: &[Vec3], labels: &[u8], shape: &TemplateShape) -> Result<Template> {
+    let mut skeleton = [Vec3::zeros(); SKELETON_POINTS];
+    for (o, p) in skeleton.iter_mut().zip(&shape.skeleton) {
+        *o = Vec3::from(*p);
+    }
+    let frame = crate::geom::Frame {
+        origin: Vec3::from(shape.origin),
+        axes: Matrix3::from_row_slice(&shape.axes),
+        spread: Vec3::from(shape.spread),
+    };
+    Template::from_parts(nodes, labels, frame, skeleton, shape.midline_fraction)
+}
+
+/// The TCP pose aiming at `p` on the bone surface: local surface normal and gap
+/// direction from the principal axes of the cloud within [`PATCH_RADIUS_MM`], the normal
+/// oriented toward `skin` (the sweep's mean probe position), the TCP `standoff` mm out
+/// along it, its beam (z) along the inward normal, its footprint (x) along the gap.
+pub fn probe_pose(cloud: &[Vec3], p: &Vec3, skin: &Vec3, standoff: f32) -> Rigid {
+    let r2 = PATCH_RADIUS_MM * PATCH_RADIUS_MM;
+    let (mut sum, mut n) = (Vec3::zeros(), 0usize);
+    for q in cloud.iter().filter(|q| (*q - p).norm_squared() <= r2) {
+        sum += q;
+        n += 1;
+    }
+    let up = (skin - p).try_normalize(1e-6).unwrap_or(Vec3::z());
+    let (mut normal, mut along) = (up, up.cross(&Vec3::x()));
+    if n >= MIN_PATCH_POINTS {
+        let mean = sum / n as f32;
+        let mut cov = Matrix3::zeros();
+        for q in cloud.iter().filter(|q| (*q - p).norm_squared() <= r2) {
+            let d = q - mean;
+            cov += d * d.transpose();
+        }
+        let eig = SymmetricEigen::new(cov);
+        normal = eig.eigenvectors.column(eig.eigenvalues.imin()).into_owned();
+        along = eig.eigenvectors.column(eig.eigenvalues.imax()).into_owned();
+    }
+    if normal.dot(&up) < 0.0 {
+        normal = -normal;
+    }
+    let z = -normal;
+    let x = (along - z * along.dot(&z))
+        .try_normalize(1e-6)
+        .or_else(|| z.cross(&Vec3::y()).try_normalize(1e-6))
+        .unwrap_or(Vec3::x());
+    let y = z.cross(&x);
+    Rigid {
+        rotation: Matrix3::from_columns(&[x, y, z]),
+        translation: p + normal * standoff,
+    }
+}
+
+/// Time of a rest-to-rest move of `d` mm under speed and acceleration limits, µs.
+fn trapezoid_duration_us(d: f32, v: f32, a: f32) -> u64 {
+    let t = if d * a <= v * v {
+        2.0 * libm::sqrtf(d / a)
+    } else {
+        d / v + v / a
+    };
+    (t * 1e6) as u64
+}
+
+/// Distance covered after `t` s of that move.
+fn trapezoid_distance(t: f32, d: f32, v: f32, a: f32) -> f32 {
+    let (t_acc, v_peak) = if d * a <= v * v {
+        (libm::sqrtf(d / a), libm::sqrtf(d * a))
+    } else {
+        (v / a, v)
+    };
+    let d_acc = 0.5 * v_peak * t_acc;
+    let t_cruise = (d - 2.0 * d_acc) / v_peak;
+    let s = if t <= t_acc {
+        0.5 * a * t * t
+    } else if t <= t_acc + t_cruise {
+        d_acc + v_peak * (t - t_acc)
+    } else {
+        let td = (t - t_acc - t_cruise).min(t_acc);
+        d - d_acc + v_peak * td - 0.5 * a * td * td
+    };
+    s.clamp(0.0, d)
+}
+
+/// Position lerp and orientation slerp from `a` (s = 0) to `b` (s = 1).
+fn interpolate(a: &Rigid, b: &Rigid, s: f32) -> Rigid {
+    let ta = TrackedPose::from_rigid(0.0, a);
+    let tb = TrackedPose::from_rigid(1.0, b);
+    ta.interpolate(&tb, s.clamp(0.0, 1.0))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn trapezoid_profile_respects_limits() {
+        for (d, v, a) in [(100.0f32, 20.0, 50.0), (2.0, 20.0, 50.0), (0.0, 10.0, 10.0)] {
+            let total = trapezoid_duration_us(d, v, a) as f32 * 1e-6;
+            let mut prev = 0.0;
+            let mut prev_speed = 0.0;
+            let dt = 0.01;
+            let mut t = 0.0;
+            while t <= total + dt {
+                let s = trapezoid_distance(t, d, v, a);
+                let speed = (s - prev) / dt;
+                assert!(speed <= v * 1.01 + 1e-3, "{d} {t}: {speed}");
+                assert!(
+                    (speed - prev_speed).abs() / dt <= a * 1.05 + 1e-2 || t < 2.0 * dt,
+                    "{d} {t}"
+                );
+                prev = s;
+                prev_speed = speed;
+                t += dt;
+            }
+            assert!((trapezoid_distance(total, d, v, a) - d).abs() < 1e-3);
+        }
+    }
+
+    #[test]
+    fn probe_pose_stands_off_along_the_outward_normal() {
+        // A flat patch in z = 0; the skin is above.
+        let mut cloud = std::vec::Vec::new();
+        for i in 0..20 {
+            for j in 0..8 {
+                cloud.push(Vec3::new(i as f32 - 10.0, (j as f32 - 4.0) * 0.5, 0.0));
+            }
+        }
+        let t = probe_pose(&cloud, &Vec3::zeros(), &Vec3::new(0.0, 0.0, 50.0), 15.0);
+        assert!((t.translation - Vec3::new(0.0, 0.0, 15.0)).norm() < 1e-4);
+        assert!((t.rotation.column(2) - Vec3::new(0.0, 0.0, -1.0)).norm() < 1e-4);
+        assert!(
+            t.rotation.column(0).x.abs() > 0.999,
+            "footprint along the long axis"
+        );
+        assert!((t.rotation.determinant() - 1.0).abs() < 1e-4);
+    }
+}
