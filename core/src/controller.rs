@@ -871,3 +871,138 @@ mod tests {
         assert!((t.rotation.determinant() - 1.0).abs() < 1e-4);
     }
 }
+
+#[cfg(test)]
+mod link_tests {
+    use super::*;
+    use crate::wire::{encode, MAX_FRAME};
+
+    type C = Controller<64>;
+
+    fn frame(seq: u16, msg: &ToController) -> std::vec::Vec<u8> {
+        let mut buf = [0u8; MAX_FRAME];
+        let n = encode(seq, msg, &mut buf).unwrap();
+        buf[..n - 1].to_vec()
+    }
+
+    fn feed(c: &mut C, seq: u16, msg: &ToController) -> std::vec::Vec<FromController> {
+        let mut f = frame(seq, msg);
+        c.receive(Ok(&mut f), 0);
+        core::iter::from_fn(|| c.next_reply().map(|(_, m)| m)).collect()
+    }
+
+    const HELLO: ToController = ToController::Hello {
+        magic: MAGIC,
+        version: VERSION,
+    };
+    const STATUS: ToController = ToController::Command(Command::Status);
+
+    #[test]
+    fn handshake_first_and_version_checked() {
+        let mut c = C::new();
+        assert_eq!(
+            feed(&mut c, 0, &STATUS),
+            [FromController::Nack {
+                seq: 0,
+                code: NackCode::Version
+            }]
+        );
+        let wrong = ToController::Hello {
+            magic: MAGIC,
+            version: VERSION + 1,
+        };
+        assert!(matches!(
+            feed(&mut c, 0, &wrong)[..],
+            [FromController::Nack {
+                code: NackCode::Version,
+                ..
+            }]
+        ));
+        assert!(matches!(
+            feed(&mut c, 0, &HELLO)[..],
+            [FromController::HelloAck { .. }]
+        ));
+    }
+
+    #[test]
+    fn duplicates_are_not_reapplied_gaps_and_corruption_are_nacked() {
+        let mut c = C::new();
+        feed(&mut c, 0, &HELLO);
+        // Seq 1: a status (its reply: a Status, then the ACK).
+        let r = feed(&mut c, 1, &STATUS);
+        assert!(matches!(
+            r[..],
+            [FromController::Status(_), FromController::Ack { seq: 1 }]
+        ));
+        // The same frame again: only its ACK again, no second Status.
+        assert_eq!(feed(&mut c, 1, &STATUS), [FromController::Ack { seq: 1 }]);
+        // Seq 3 skips 2: NACK naming 2, nothing applied.
+        assert_eq!(
+            feed(&mut c, 3, &STATUS),
+            [FromController::Nack {
+                seq: 2,
+                code: NackCode::OutOfOrder
+            }]
+        );
+        // A corrupt frame: NACK naming the number expected.
+        let mut f = frame(2, &STATUS);
+        f[1] ^= 0x10;
+        c.receive(Ok(&mut f), 0);
+        assert_eq!(
+            c.next_reply().map(|(_, m)| m),
+            Some(FromController::Nack {
+                seq: 2,
+                code: NackCode::Corrupt
+            })
+        );
+        c.receive(Err(FrameError::TooLong), 0);
+        assert_eq!(
+            c.next_reply().map(|(_, m)| m),
+            Some(FromController::Nack {
+                seq: 2,
+                code: NackCode::TooLong
+            })
+        );
+        // A message in the wrong state is refused with its own number and consumed.
+        let r = feed(&mut c, 2, &ToController::Command(Command::EndSweep));
+        assert_eq!(
+            r,
+            [FromController::Nack {
+                seq: 2,
+                code: NackCode::BadState
+            }]
+        );
+        assert!(
+            matches!(feed(&mut c, 3, &STATUS)[..], [FromController::Status(s), FromController::Ack { seq: 3 }] if s.expected_seq == 4)
+        );
+    }
+
+    #[test]
+    fn bad_configuration_is_invalid_and_nothing_changes() {
+        let mut c = C::new();
+        feed(&mut c, 0, &HELLO);
+        let bad = ToController::Configure(Configure {
+            probe: crate::wire::ProbeW {
+                width_px: 0,
+                height_px: 10,
+                footprint_mm: 30.0,
+                depth_mm: 30.0,
+            },
+            tcp_t_us: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0],
+            ee_t_tcp: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0],
+            lag_us: 0,
+            voxel_mm: 2.0,
+            max_speed_mm_s: 10.0,
+            max_accel_mm_s2: 10.0,
+            standoff_mm: 10.0,
+        });
+        assert!(matches!(
+            feed(&mut c, 1, &bad)[..],
+            [FromController::Nack {
+                seq: 1,
+                code: NackCode::Invalid(12)
+            }]
+        ));
+        assert_eq!(c.state(), State::Idle);
+    }
+}

@@ -456,6 +456,10 @@ pub struct HilReport {
     pub points: u16,
     /// Wall time of the procedure, s.
     pub wall_s: f64,
+    /// Pose-timeout faults the controller reported.
+    pub pose_timeouts: u32,
+    /// Setpoints received more than 70 ms into a pose gap (must be 0).
+    pub setpoints_in_gap: u32,
 }
 
 impl HilReport {
@@ -530,10 +534,28 @@ fn rigid12(r: &Rigid) -> [f32; 12] {
     ]
 }
 
+/// Extra robot behaviour for tests of the controller's watchdog.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RunOptions {
+    /// While executing, the robot stops reporting poses from this many ms after Execute
+    /// for the second number of ms.
+    pub pose_gap_ms: Option<(u64, u64)>,
+}
+
 /// Runs the whole procedure on phantom `phantom` through `session`.
 pub fn run<P: Port>(
     session: &mut Session<P>,
     phantom: &PhantomConfig,
+    progress: &mut dyn FnMut(&str),
+) -> Result<HilReport, CliError> {
+    run_with(session, phantom, RunOptions::default(), progress)
+}
+
+/// [`run`] with [`RunOptions`].
+pub fn run_with<P: Port>(
+    session: &mut Session<P>,
+    phantom: &PhantomConfig,
+    options: RunOptions,
     progress: &mut dyn FnMut(&str),
 ) -> Result<HilReport, CliError> {
     let t0 = Instant::now();
@@ -710,7 +732,13 @@ pub fn run<P: Port>(
     let alpha = 1.0 - (-0.01 / ROBOT_LAG_S).exp();
     let mut done = false;
     let mut quiet_ticks = 0;
+    let mut exec_ms = 0u64;
+    let (mut pose_timeouts, mut setpoints_in_gap) = (0u32, 0u32);
     while !done {
+        let in_gap = options
+            .pose_gap_ms
+            .is_some_and(|(from, len)| exec_ms >= from && exec_ms < from + len);
+        exec_ms += 10;
         if exec_start.elapsed() > timeout {
             return Err(CliError::Usage("execution did not finish in time".into()));
         }
@@ -719,7 +747,9 @@ pub fn run<P: Port>(
         let q1 = TrackedPose::from_rigid(1.0, &setpoint);
         tcp = q0.interpolate(&q1, alpha);
         flange = tcp.after(&tcp_t_ee);
-        send_pose(session, robot_t_us, &flange)?;
+        if !in_gap {
+            send_pose(session, robot_t_us, &flange)?;
+        }
         robot_t_us += 10_000;
         session.port.advance(10_000);
         session.pump(Duration::from_millis(2))?;
@@ -728,6 +758,13 @@ pub fn run<P: Port>(
             match m {
                 FromController::Setpoint(sp) => {
                     got_setpoint = true;
+                    // The controller may emit up to the watchdog's 50 ms into a gap.
+                    if options
+                        .pose_gap_ms
+                        .is_some_and(|(from, len)| exec_ms > from + 70 && exec_ms <= from + len)
+                    {
+                        setpoints_in_gap += 1;
+                    }
                     setpoint = TrackedPose::new(0.0, Vec3::from(sp.position), sp.quat)?.to_rigid();
                     if current.is_some_and(|c| c != sp.waypoint) {
                         if let Some(c) = current {
@@ -737,11 +774,19 @@ pub fn run<P: Port>(
                     current = Some(sp.waypoint);
                 }
                 FromController::Status(s) if s.state == State::Done => done = true,
+                FromController::Fault(wire::Fault::PoseTimeout) => {
+                    pose_timeouts += 1;
+                    progress("controller: robot poses stopped, setpoints stopped");
+                }
                 FromController::Fault(f) => progress(&format!("controller fault: {f:?}")),
                 _ => {}
             }
         }
-        quiet_ticks = if got_setpoint { 0 } else { quiet_ticks + 1 };
+        quiet_ticks = if got_setpoint || in_gap {
+            0
+        } else {
+            quiet_ticks + 1
+        };
         if quiet_ticks > 20 {
             session.send(&ToController::Command(Command::Status))?;
             quiet_ticks = 0;
@@ -806,5 +851,7 @@ pub fn run<P: Port>(
         lag_ms: lag.lag_s * 1e3,
         points: status.points,
         wall_s: t0.elapsed().as_secs_f64(),
+        pose_timeouts,
+        setpoints_in_gap,
     })
 }

@@ -1,0 +1,105 @@
+//! The controller through the robot PC's procedure (`ribreg hil --in-process`): every
+//! waypoint within the clinical tolerance, each link fault survived with nothing lost or
+//! applied twice, and the pose watchdog.
+
+use ribreg_sim::hil::{self, Faults, HilReport, InProcess, RunOptions, Session};
+use ribreg_sim::phantom::PhantomConfig;
+
+fn run(faults: Option<Faults>, options: RunOptions) -> HilReport {
+    let mut session = Session::new(InProcess::new(), faults.map(|f| (f, 5)));
+    hil::run_with(
+        &mut session,
+        &PhantomConfig::default(),
+        options,
+        &mut |_| {},
+    )
+    .unwrap()
+}
+
+fn consistent(r: &HilReport) {
+    assert_eq!(r.applied[0], r.applied[2], "poses applied vs sent");
+    assert_eq!(r.applied[1], r.applied[3], "frames applied vs sent");
+}
+
+#[test]
+fn procedure_within_tolerance_and_every_fault_survived() {
+    let clean = run(None, RunOptions::default());
+    consistent(&clean);
+    assert_eq!(clean.waypoints.len(), 10);
+    assert!(
+        clean.max_error() <= hil::TOLERANCE_MM,
+        "{:?}",
+        clean.waypoints
+    );
+    assert!(clean.refused.is_empty(), "{:?}", clean.refused);
+    let zero = Faults {
+        corrupt: 0.0,
+        drop: 0.0,
+        duplicate: 0.0,
+        reorder: 0.0,
+        garbage: 0.0,
+    };
+    let cases = [
+        (
+            "corrupt",
+            Faults {
+                corrupt: 0.05,
+                ..zero
+            },
+            0,
+        ),
+        ("drop", Faults { drop: 0.05, ..zero }, 1),
+        (
+            "duplicate",
+            Faults {
+                duplicate: 0.05,
+                ..zero
+            },
+            2,
+        ),
+        (
+            "reorder",
+            Faults {
+                reorder: 0.05,
+                ..zero
+            },
+            3,
+        ),
+        (
+            "garbage",
+            Faults {
+                garbage: 0.05,
+                ..zero
+            },
+            4,
+        ),
+        ("all", Faults::DEFAULT, 5),
+    ];
+    for (name, f, k) in cases {
+        let r = run(Some(f), RunOptions::default());
+        consistent(&r);
+        if k < 5 {
+            assert!(r.link.injected[k] > 100, "{name}: {:?}", r.link);
+        }
+        // Same messages applied in the same order: the same result, bit for bit.
+        let mapped = |r: &HilReport| r.waypoints.iter().map(|w| w.mapped).collect::<Vec<_>>();
+        assert_eq!(mapped(&r), mapped(&clean), "{name}");
+        assert_eq!(r.points, clean.points, "{name}");
+        assert!(r.refused.is_empty(), "{name}: {:?}", r.refused);
+        println!("{name}: {:?}", r.link);
+    }
+}
+
+#[test]
+fn setpoints_stop_when_robot_poses_stop() {
+    let r = run(
+        None,
+        RunOptions {
+            pose_gap_ms: Some((1_000, 300)),
+        },
+    );
+    assert_eq!(r.pose_timeouts, 1);
+    assert_eq!(r.setpoints_in_gap, 0);
+    // After the gap the procedure completes within tolerance.
+    assert!(r.max_error() <= hil::TOLERANCE_MM);
+}
