@@ -1006,3 +1006,154 @@ mod link_tests {
         assert_eq!(c.state(), State::Idle);
     }
 }
+
+/// Random messages with random (often hostile) content, random sequence numbers and
+/// random corruption never make the controller panic, and it keeps its invariants.
+#[cfg(test)]
+mod fuzz_tests {
+    use super::*;
+    use crate::rng::Rng;
+    use crate::wire::{encode, FrameW, Node, PoseW, ProbeW, MAX_FRAME, MAX_FRAME_PIXELS};
+
+    fn f(rng: &mut Rng) -> f32 {
+        match rng.below(8) {
+            0 => f32::NAN,
+            1 => f32::INFINITY,
+            2 => -1e30,
+            3 => 0.0,
+            _ => (rng.next_f32() - 0.5) * 400.0,
+        }
+    }
+
+    fn message(rng: &mut Rng) -> ToController {
+        let p = |rng: &mut Rng| [f(rng), f(rng), f(rng)];
+        match rng.below(10) {
+            0 => ToController::Hello {
+                magic: if rng.below(2) == 0 {
+                    MAGIC
+                } else {
+                    rng.next_u32()
+                },
+                version: VERSION,
+            },
+            1 => ToController::Configure(Configure {
+                probe: ProbeW {
+                    width_px: rng.below(1000) as u16,
+                    height_px: rng.below(1000) as u16,
+                    footprint_mm: f(rng),
+                    depth_mm: f(rng),
+                },
+                tcp_t_us: core::array::from_fn(|_| f(rng)),
+                ee_t_tcp: [
+                    1.0,
+                    0.0,
+                    0.0,
+                    0.0,
+                    1.0,
+                    0.0,
+                    0.0,
+                    0.0,
+                    1.0,
+                    0.0,
+                    0.0,
+                    f(rng),
+                ],
+                lag_us: rng.next_u32() as i32,
+                voxel_mm: f(rng),
+                max_speed_mm_s: f(rng),
+                max_accel_mm_s2: f(rng),
+                standoff_mm: f(rng),
+            }),
+            2 => {
+                let mut nodes = heapless::Vec::new();
+                for _ in 0..rng.below(33) {
+                    let _ = nodes.push(Node {
+                        p: p(rng),
+                        label: rng.below(8) as u8,
+                    });
+                }
+                ToController::TemplateNodes {
+                    offset: rng.below(500) as u16,
+                    total: rng.below(500) as u16,
+                    nodes,
+                }
+            }
+            3 => ToController::TemplateShape(TemplateShape {
+                origin: p(rng),
+                axes: core::array::from_fn(|_| f(rng)),
+                spread: p(rng),
+                skeleton: core::array::from_fn(|_| p(rng)),
+                midline_fraction: core::array::from_fn(|_| f(rng)),
+            }),
+            4 => {
+                let mut points = heapless::Vec::new();
+                for _ in 0..rng.below(9) {
+                    let _ = points.push(p(rng));
+                }
+                ToController::Waypoints {
+                    offset: rng.below(40) as u8,
+                    total: rng.below(40) as u8,
+                    points,
+                }
+            }
+            5 | 6 => ToController::Pose(PoseW {
+                t_us: u64::from(rng.next_u32()),
+                position: p(rng),
+                quat: [f(rng), f(rng), f(rng), f(rng)],
+            }),
+            7 => {
+                let mut pixels = heapless::Vec::new();
+                for _ in 0..rng.below(MAX_FRAME_PIXELS as u32 + 1) {
+                    let _ = pixels.push([rng.next_u32() as u16, rng.next_u32() as u16]);
+                }
+                ToController::Frame(FrameW {
+                    t_us: u64::from(rng.next_u32()),
+                    frame: rng.next_u32(),
+                    pixels,
+                })
+            }
+            _ => ToController::Command(
+                [
+                    Command::StartSweep,
+                    Command::EndSweep,
+                    Command::Register,
+                    Command::Execute,
+                    Command::Abort,
+                    Command::Status,
+                    Command::Result,
+                ][rng.below(7) as usize],
+            ),
+        }
+    }
+
+    #[test]
+    fn hostile_streams_never_panic() {
+        let mut rng = Rng::new(2024);
+        let mut c: Controller<256> = Controller::new();
+        let mut buf = [0u8; MAX_FRAME];
+        let mut seq = 0u16;
+        let mut now = 0u64;
+        for _ in 0..20_000 {
+            let msg = message(&mut rng);
+            // Mostly the expected number, sometimes a duplicate or a jump.
+            let s = match rng.below(10) {
+                0 => seq.wrapping_sub(rng.below(5) as u16),
+                1 => seq.wrapping_add(rng.below(5) as u16),
+                _ => seq,
+            };
+            let n = encode(s, &msg, &mut buf).unwrap();
+            if rng.below(10) == 0 {
+                let i = rng.below(n as u32 - 1) as usize;
+                buf[i] = rng.next_u32() as u8 | 1;
+            }
+            let before = c.status().expected_seq;
+            c.receive(Ok(&mut buf[..n - 1]), now);
+            let after = c.status().expected_seq;
+            assert!(after == before || after == before.wrapping_add(1) || s == 0);
+            seq = after;
+            now += u64::from(rng.below(20_000));
+            c.poll(now);
+            while c.next_reply().is_some() {}
+        }
+    }
+}
