@@ -39,8 +39,8 @@ use crate::probe::{Calibration, ProbeModel};
 use crate::skeleton::{SKELETON_POINTS, SOM1_CAPACITY};
 use crate::track::{TrackedPose, TRACK_CAPACITY};
 use crate::wire::{
-    error_code, Command, Configure, FrameError, FromController, NackCode, PoseW, SetpointW, State,
-    StatusW, TemplateShape, ToController, WaypointW, MAGIC, MAX_FRAME, MAX_WAYPOINTS,
+    error_code, Command, Configure, CostW, FrameError, FromController, NackCode, PoseW, SetpointW,
+    State, StatusW, TemplateShape, ToController, WaypointW, MAGIC, MAX_FRAME, MAX_WAYPOINTS,
     PIXEL_SUBDIVISIONS, VERSION,
 };
 use crate::Vec3;
@@ -129,6 +129,7 @@ pub struct Controller<const VOXELS: usize> {
     next_setpoint_us: u64,
     paused_since: Option<u64>,
     waypoint: u8,
+    cost: CostW,
 }
 
 impl<const VOXELS: usize> Default for Controller<VOXELS> {
@@ -168,7 +169,20 @@ impl<const VOXELS: usize> Controller<VOXELS> {
             next_setpoint_us: 0,
             paused_since: None,
             waypoint: 0,
+            cost: CostW {
+                registration_instructions: 0,
+                registration_calls: 0,
+                worst_call_instructions: 0,
+                worst_step_instructions: 0,
+                worst_receive_instructions: 0,
+                peak_stack_bytes: 0,
+            },
         }
+    }
+
+    /// Records the platform's measured costs, reported on [`Command::Cost`].
+    pub fn set_cost(&mut self, cost: CostW) {
+        self.cost = cost;
     }
 
     /// The current state.
@@ -498,6 +512,10 @@ impl<const VOXELS: usize> Controller<VOXELS> {
             }
             Command::Status => {
                 self.send(FromController::Status(self.status()));
+                Ok(())
+            }
+            Command::Cost => {
+                self.send(FromController::Cost(self.cost));
                 Ok(())
             }
             Command::Result => {
@@ -1121,7 +1139,8 @@ mod fuzz_tests {
                     Command::Abort,
                     Command::Status,
                     Command::Result,
-                ][rng.below(7) as usize],
+                    Command::Cost,
+                ][rng.below(8) as usize],
             ),
         }
     }

@@ -169,6 +169,8 @@ pub enum Command {
     Status,
     /// Send the registration result (one message per waypoint).
     Result,
+    /// Send the controller's measured costs ([`FromController::Cost`]).
+    Cost,
 }
 
 /// Robot PC → controller.
@@ -322,6 +324,25 @@ pub struct SetpointW {
 }
 const SETPOINT_W: usize = U64 + 7 * F32 + U8;
 
+/// What the controller's work costs on its platform (instructions counted by the
+/// firmware; the in-process controller reports zeros).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct CostW {
+    /// Instructions spent in registration steps, the last registration.
+    pub registration_instructions: u64,
+    /// Registration steps (calls) of the last registration.
+    pub registration_calls: u32,
+    /// Most instructions one control-loop call took (message handling, poll, replies).
+    pub worst_call_instructions: u32,
+    /// Most instructions one registration step took.
+    pub worst_step_instructions: u32,
+    /// Most instructions handling one received frame took.
+    pub worst_receive_instructions: u32,
+    /// Peak stack use, bytes.
+    pub peak_stack_bytes: u32,
+}
+const COST_W: usize = U64 + 5 * U32;
+
 /// Controller → robot PC.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub enum FromController {
@@ -354,6 +375,8 @@ pub enum FromController {
     Setpoint(SetpointW),
     /// A fault.
     Fault(Fault),
+    /// Measured costs (zero where the platform does not measure them).
+    Cost(CostW),
 }
 
 /// Largest encoded [`FromController`].

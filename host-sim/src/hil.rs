@@ -32,7 +32,7 @@ use ribreg_core::geom::Rigid;
 use ribreg_core::rng::Rng;
 use ribreg_core::track::TrackedPose;
 use ribreg_core::wire::{
-    self, Command, Configure, FrameW, FromController, NackCode, Node, PoseW, ProbeW, State,
+    self, Command, Configure, CostW, FrameW, FromController, NackCode, Node, PoseW, ProbeW, State,
     TemplateShape, ToController, WaypointW, MAGIC, MAX_FRAME, NODES_PER_CHUNK, PIXEL_SUBDIVISIONS,
     VERSION, WAYPOINTS_PER_CHUNK,
 };
@@ -456,6 +456,8 @@ pub struct HilReport {
     pub points: u16,
     /// Wall time of the procedure, s.
     pub wall_s: f64,
+    /// The controller's measured costs (zeros in-process).
+    pub cost: CostW,
     /// Pose-timeout faults the controller reported.
     pub pose_timeouts: u32,
     /// Setpoints received more than 70 ms into a pose gap (must be 0).
@@ -796,17 +798,20 @@ pub fn run_with<P: Port>(
         reached[usize::from(c)].get_or_insert(tcp);
     }
     session.send(&ToController::Command(Command::Status))?;
+    session.send(&ToController::Command(Command::Cost))?;
     session.flush(timeout)?;
-    let mut status = None;
-    for _ in 0..200 {
+    let (mut status, mut cost) = (None, None);
+    for _ in 0..400 {
         session.port.advance(1000);
         session.pump(Duration::from_millis(5))?;
         while let Some(m) = session.next_message() {
-            if let FromController::Status(s) = m {
-                status = Some(s);
+            match m {
+                FromController::Status(s) => status = Some(s),
+                FromController::Cost(c) => cost = Some(c),
+                _ => {}
             }
         }
-        if status.is_some() {
+        if status.is_some() && cost.is_some() {
             break;
         }
     }
@@ -853,5 +858,6 @@ pub fn run_with<P: Port>(
         wall_s: t0.elapsed().as_secs_f64(),
         pose_timeouts,
         setpoints_in_gap,
+        cost: cost.unwrap_or_default(),
     })
 }
