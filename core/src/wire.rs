@@ -385,7 +385,10 @@ pub const MAX_FROM_CONTROLLER: usize = TAG
         max(U32 + 2 * U16, U16),
         max(
             U16 + 2 * TAG,
-            max(STATUS_W, max(WAYPOINT_W, max(SETPOINT_W, 2 * TAG))),
+            max(
+                STATUS_W,
+                max(WAYPOINT_W, max(SETPOINT_W, max(2 * TAG, COST_W))),
+            ),
         ),
     );
 
