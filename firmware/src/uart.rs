@@ -117,6 +117,11 @@ impl<const BASE: usize, const RX_IRQ: u16> Uart<BASE, RX_IRQ> {
         uart.write_reg(BAUDDIV, bauddiv.max(16));
         uart.write_reg(INTCLEAR, 0xF);
         uart.write_reg(CTRL, CTRL_TX_EN | CTRL_RX_EN);
+        // Discard any stale byte. Under QEMU this read also matters: enabling RX does not
+        // tell the emulator to look at its socket again, a DATA read does. Without it,
+        // input that arrived while RX was still disabled waited for QEMU's next timer
+        // event, the SysTick wrap, 0.67 s later (seen in about 1 run in 7).
+        let _ = uart.read_reg(DATA);
         // SAFETY: no handler ever runs for this line: its source (CTRL bit 3) is enabled
         // only with PRIMASK set and is acknowledged and unpended before PRIMASK is
         // cleared (`wait_rx`). Unmasking breaks no mask-based critical section.
