@@ -113,7 +113,7 @@ mod app {
             stack_hi - stack_lo
         );
         defmt::info!(
-            "spin of {=u32} instructions = {=u64} ticks = {=u64} instructions at icount shift=0; empty region = {=u64} ticks",
+            "spin of {=u32} instructions = {=u64} ticks (= {=u64} instructions if run with -icount shift=0); empty region = {=u64} ticks",
             2 * crate::CALIBRATION_ITERATIONS,
             cal.spin_ticks,
             cal.spin_instructions,
