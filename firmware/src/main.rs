@@ -84,11 +84,10 @@ mod app {
 
     fn calibrate() -> Calibration {
         let ((), overhead_ticks) = Cost::measure(|| ());
-        let ((), spin_ticks) =
-            Cost::measure(|| cost::spin(core::hint::black_box(crate::CALIBRATION_ITERATIONS)));
         let stamp = Cost::start();
         cost::spin(core::hint::black_box(crate::CALIBRATION_ITERATIONS));
         let spin_instructions = stamp.elapsed_instructions();
+        let spin_ticks = spin_instructions / cost::INSTRUCTIONS_PER_TICK;
         Calibration {
             overhead_ticks,
             spin_ticks,
