@@ -122,6 +122,8 @@ impl<const BASE: usize, const RX_IRQ: u16> Uart<BASE, RX_IRQ> {
         // input that arrived while RX was still disabled waited for QEMU's next timer
         // event, the SysTick wrap, 0.67 s later (seen in about 1 run in 7).
         let _ = uart.read_reg(DATA);
+        // Drop a request left pending from before (the line has no handler).
+        NVIC::unpend(Irq(RX_IRQ));
         // SAFETY: no handler ever runs for this line: its source (CTRL bit 3) is enabled
         // only with PRIMASK set and is acknowledged and unpended before PRIMASK is
         // cleared (`wait_rx`). Unmasking breaks no mask-based critical section.
