@@ -9,6 +9,7 @@ pub mod io;
 pub mod phantom;
 pub mod plot;
 pub mod prep;
+pub mod qemu;
 pub mod register;
 pub mod sample;
 pub mod stats;

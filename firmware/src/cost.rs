@@ -1,0 +1,314 @@
+//! Cost measurement on the target: instruction counts from SysTick, and the stack's
+//! high-water mark from stack painting.
+//!
+//! # Instruction counts
+//!
+//! DWT CYCCNT reads 0 under QEMU 7.2, so the counter is SysTick clocked from the core
+//! (`CLKSOURCE = 1`, 25 MHz on MPS2), free-running with the largest reload (2^24 ticks a
+//! period) and extended to 64 bits by counting wraps in the SysTick exception.
+//!
+//! Under `qemu-system-arm -icount shift=0,align=off,sleep=off` every guest instruction
+//! advances the virtual clock by 2^0 ns, and a 25 MHz tick lasts 40 ns, so one tick is
+//! [`INSTRUCTIONS_PER_TICK`] = 40 instructions, deterministically. This was measured, not
+//! assumed: at boot the firmware times [`spin`] (exactly 2 instructions per iteration) and
+//! reports the ticks; the host test `qemu_echo` checks 20,000 instructions read as
+//! 500 ticks. The resolution is therefore one tick, 40 instructions, and a
+//! [`Stamp`]/[`Stamp::elapsed_ticks`] pair itself costs about one tick.
+//! Without `-icount` the ticks follow the host's clock and say nothing about cost.
+//! Instructions are not cycles: quote the count and the cycles per instruction assumed.
+//!
+//! The 64-bit count stays right as long as interrupts are never masked for longer than
+//! one period (2^24 ticks: 0.67 s at 25 MHz, 671 M instructions under `-icount shift=0`):
+//! a wrap that happens while they are masked is seen through the SysTick pending bit, a
+//! second one would be lost.
+//!
+//! # Stack
+//!
+//! cortex-m-rt's `paint-stack` feature fills the stack region, `_stack_end` (lowest
+//! address) to `_stack_start` (initial SP), with [`STACK_PAINT`] before `main`. With
+//! flip-link the stack sits at the bottom of RAM, below `.data`/`.bss` (flip-link
+//! defines `_stack_end` as the RAM origin and `_stack_start` as the start of the statics);
+//! with the default layout it sits above them. Either way the stack grows down towards
+//! `_stack_end`, so the high-water mark is the first word above `_stack_end` that is no
+//! longer painted. A frame that happens to store 0xCCCC_CCCC at its deepest word makes
+//! the figure one word short; nothing else is approximate.
+
+/// SysTick reload value: the counter runs 0xFF_FFFF down to 0, a period of 2^24 ticks.
+pub const RELOAD: u32 = 0x00FF_FFFF;
+
+/// Ticks in one SysTick period.
+pub const PERIOD_TICKS: u64 = RELOAD as u64 + 1;
+
+/// SysTick clock on MPS2 (the core clock), Hz.
+pub const CORE_CLOCK_HZ: u32 = 25_000_000;
+
+/// Guest instructions per SysTick tick under `-icount shift=0` (1 ns per instruction,
+/// 40 ns per 25 MHz tick). Valid for that emulator setting only.
+pub const INSTRUCTIONS_PER_TICK: u64 = 40;
+
+/// The word cortex-m-rt paints the stack with (`cortex_m_rt::STACK_PAINT_VALUE`).
+pub const STACK_PAINT: u32 = 0xCCCC_CCCC;
+
+/// Ticks since SysTick was started, from the wrap count and the current value register
+/// (which counts down from [`RELOAD`]).
+pub const fn ticks_from(wraps: u64, current: u32) -> u64 {
+    wraps * PERIOD_TICKS + (RELOAD - (current & RELOAD)) as u64
+}
+
+/// One consistent reading of the free-running counter, taken with interrupts masked:
+/// `wraps` is the count kept by the SysTick handler, `before` the value register read
+/// first, `pending` the SysTick pending bit read after it, `after` the value register read
+/// after that. If the bit is set, the counter wrapped before it was read and the handler
+/// has not counted that wrap yet, so `after` belongs to the next period; if it is clear,
+/// `before` was read before any uncounted wrap.
+pub const fn reading(wraps: u32, before: u32, pending: bool, after: u32) -> u64 {
+    if pending {
+        ticks_from(wraps as u64 + 1, after)
+    } else {
+        ticks_from(wraps as u64, before)
+    }
+}
+
+/// How many words at the low end of a stack of `len` words still hold [`STACK_PAINT`];
+/// `word(i)` reads the `i`-th word from the lowest address up.
+pub fn painted_words(len: usize, mut word: impl FnMut(usize) -> u32) -> usize {
+    (0..len).take_while(|&i| word(i) == STACK_PAINT).count()
+}
+
+/// A point on the free-running counter.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
+pub struct Stamp {
+    ticks: u64,
+}
+
+impl Stamp {
+    /// A stamp at `ticks` since the counter started.
+    pub const fn at(ticks: u64) -> Self {
+        Self { ticks }
+    }
+
+    /// Ticks since the counter started.
+    pub const fn ticks(self) -> u64 {
+        self.ticks
+    }
+
+    /// Ticks from `self` to `later` (0 if `later` is earlier).
+    pub const fn ticks_until(self, later: Stamp) -> u64 {
+        later.ticks.saturating_sub(self.ticks)
+    }
+}
+
+#[cfg(target_os = "none")]
+pub use target::*;
+
+#[cfg(target_os = "none")]
+mod target {
+    use super::*;
+    use core::sync::atomic::{AtomicU32, Ordering};
+    use cortex_m::peripheral::{syst::SystClkSource, SCB, SYST};
+    use cortex_m_rt::exception;
+
+    const _: () = assert!(cortex_m_rt::STACK_PAINT_VALUE == STACK_PAINT);
+
+    /// SysTick periods completed, counted by the SysTick exception.
+    static WRAPS: AtomicU32 = AtomicU32::new(0);
+
+    #[exception]
+    fn SysTick() {
+        WRAPS.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// The free-running instruction counter (SysTick).
+    pub struct Cost;
+
+    impl Cost {
+        /// Starts SysTick from the core clock with the largest reload and its wrap
+        /// interrupt. Taking `SYST` by value keeps anyone else from reprogramming it.
+        /// Before this, every stamp reads 0.
+        pub fn init(mut syst: SYST) {
+            syst.disable_counter();
+            syst.set_clock_source(SystClkSource::Core);
+            syst.set_reload(RELOAD);
+            syst.clear_current();
+            syst.enable_interrupt();
+            cortex_m::interrupt::free(|_| {
+                syst.enable_counter();
+                // The value register reads 0 until the counter has loaded the reload
+                // value (one tick on hardware, longer under QEMU without -icount); a 0
+                // would read as the end of period 0, and time would then jump back.
+                // Loading may also pend the wrap exception: start from zero wraps after.
+                while SYST::get_current() == 0 {}
+                SCB::clear_pendst();
+                WRAPS.store(0, Ordering::Relaxed);
+            });
+        }
+
+        /// The counter now.
+        #[inline]
+        pub fn start() -> Stamp {
+            Stamp::at(now_ticks())
+        }
+
+        /// Runs `f` and returns its result with the ticks it took.
+        #[inline]
+        pub fn measure<R>(f: impl FnOnce() -> R) -> (R, u64) {
+            let s = Self::start();
+            let r = f();
+            (r, s.elapsed_ticks())
+        }
+    }
+
+    /// Ticks since [`Cost::init`].
+    #[inline]
+    pub fn now_ticks() -> u64 {
+        cortex_m::interrupt::free(|_| {
+            let wraps = WRAPS.load(Ordering::Relaxed);
+            let before = SYST::get_current();
+            let pending = SCB::is_pendst_pending();
+            let after = if pending { SYST::get_current() } else { before };
+            reading(wraps, before, pending, after)
+        })
+    }
+
+    impl Stamp {
+        /// Ticks from this stamp to now.
+        #[inline]
+        pub fn elapsed_ticks(self) -> u64 {
+            self.ticks_until(Cost::start())
+        }
+
+        /// Instructions from this stamp to now, assuming `-icount shift=0`
+        /// ([`INSTRUCTIONS_PER_TICK`]); resolution one tick.
+        #[inline]
+        pub fn elapsed_instructions(self) -> u64 {
+            self.elapsed_ticks() * INSTRUCTIONS_PER_TICK
+        }
+    }
+
+    /// Executes exactly `2 * iterations` instructions in its loop (`subs` + `bne`), plus
+    /// the call around it: the known workload that calibrates the counter.
+    #[inline(never)]
+    pub fn spin(iterations: u32) {
+        if iterations == 0 {
+            return;
+        }
+        // SAFETY: the loop only decrements a scratch register; it touches no memory and
+        // no stack, and terminates because `iterations` is non-zero.
+        unsafe {
+            core::arch::asm!(
+                "2:",
+                "subs {n}, #1",
+                "bne 2b",
+                n = inout(reg) iterations => _,
+                options(nomem, nostack),
+            );
+        }
+    }
+
+    extern "C" {
+        /// Initial stack pointer (highest address of the stack, exclusive).
+        static _stack_start: u32;
+        /// Lowest address of the stack.
+        static _stack_end: u32;
+    }
+
+    /// The stack region `[lowest, highest)`, from the linker's symbols.
+    pub fn stack_bounds() -> (usize, usize) {
+        // Only the addresses are taken; nothing is read through these pointers here.
+        let lo = core::ptr::addr_of!(_stack_end) as usize;
+        let hi = core::ptr::addr_of!(_stack_start) as usize;
+        (lo, hi)
+    }
+
+    /// Size of the stack region, bytes (all RAM left by the statics under flip-link).
+    pub fn stack_size_bytes() -> usize {
+        let (lo, hi) = stack_bounds();
+        hi - lo
+    }
+
+    /// Deepest stack use since reset, bytes: the stack region minus the words at its low
+    /// end that still hold the paint.
+    pub fn peak_stack_bytes() -> usize {
+        let (lo, hi) = stack_bounds();
+        let len = (hi - lo) / 4;
+        let base = lo as *const u32;
+        let painted = painted_words(len, |i| {
+            // SAFETY: `i < len`, so the word lies in the stack region the linker reserved
+            // (RAM, word aligned by cortex-m-rt's asserts). Words below the current stack
+            // pointer belong to no live frame; the scan stops at the first word ever
+            // written, so it reads live frames only when the stack is at its peak now,
+            // and a volatile read of a plain RAM word has no side effect.
+            unsafe { core::ptr::read_volatile(base.add(i)) }
+        });
+        (len - painted) * 4
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ticks_count_down_within_a_period() {
+        assert_eq!(ticks_from(0, RELOAD), 0);
+        assert_eq!(ticks_from(0, 0), u64::from(RELOAD));
+        assert_eq!(ticks_from(3, RELOAD - 10), 3 * PERIOD_TICKS + 10);
+        // Bits above the 24-bit counter are ignored.
+        assert_eq!(ticks_from(0, 0xFF00_0000 | RELOAD), 0);
+    }
+
+    #[test]
+    fn a_wrap_not_yet_counted_is_seen_through_the_pending_bit() {
+        // The counter wrapped between the two value reads: `before` is just above zero,
+        // `after` just below the reload, the handler has not run yet.
+        let near_end = ticks_from(7, 2);
+        let next = reading(7, 2, true, RELOAD - 1);
+        assert_eq!(next, 8 * PERIOD_TICKS + 1);
+        assert!(next > near_end);
+        // Pending read as clear: `before` is valid and `after` is ignored.
+        assert_eq!(reading(7, 2, false, 12345), near_end);
+        // Monotone across a whole simulated run of wraps.
+        let mut last = 0;
+        for wraps in 0..4u32 {
+            for value in [RELOAD, RELOAD / 2, 1, 0] {
+                let t = reading(wraps, value, false, value);
+                assert!(t >= last);
+                last = t;
+            }
+            let t = reading(wraps, 0, true, RELOAD);
+            assert!(t >= last);
+            last = t;
+        }
+        // The u32 wrap count (2^32 periods of 0.67 s, about 91 years) plus a pending wrap
+        // does not overflow.
+        assert_eq!(reading(u32::MAX, 0, true, RELOAD), (1 << 32) * PERIOD_TICKS);
+    }
+
+    #[test]
+    fn stamps_subtract_without_underflow() {
+        let a = Stamp::at(100);
+        let b = Stamp::at(1_000);
+        assert_eq!(a.ticks_until(b), 900);
+        assert_eq!(b.ticks_until(a), 0);
+        assert_eq!(b.ticks(), 1_000);
+        assert_eq!(
+            INSTRUCTIONS_PER_TICK * u64::from(CORE_CLOCK_HZ),
+            1_000_000_000
+        );
+    }
+
+    #[test]
+    fn high_water_mark_is_the_first_unpainted_word() {
+        // Stack of 8 words, lowest address first; the stack grows down, so used words
+        // are at the high end.
+        let mut stack = [STACK_PAINT; 8];
+        assert_eq!(painted_words(8, |i| stack[i]), 8);
+        stack[5] = 0;
+        stack[7] = 1;
+        assert_eq!(painted_words(8, |i| stack[i]), 5);
+        stack[0] = 42;
+        assert_eq!(painted_words(8, |i| stack[i]), 0);
+        assert_eq!(painted_words(0, |_| unreachable!()), 0);
+    }
+}
