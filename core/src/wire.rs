@@ -490,7 +490,8 @@ pub fn encode<T: Serialize>(seq: u16, msg: &T, out: &mut [u8]) -> Result<usize, 
     Ok(k + 1)
 }
 
-/// Decodes one frame's bytes (without the delimiter), in place.
+/// Decodes one frame's bytes (without the delimiter), in place. The frame must hold exactly
+/// one envelope: bytes after it are [`FrameError::Decode`].
 pub fn decode<'de, T: Deserialize<'de>>(frame: &'de mut [u8]) -> Result<(u16, T), FrameError> {
     let n = cobs::decode_in_place(frame).map_err(|_| FrameError::Cobs)?;
     if n < CRC + 1 {
@@ -500,8 +501,11 @@ pub fn decode<'de, T: Deserialize<'de>>(frame: &'de mut [u8]) -> Result<(u16, T)
     if crc16(body).to_le_bytes() != [crc[0], crc[1]] {
         return Err(FrameError::Crc);
     }
-    let env: Envelope<T> = postcard::from_bytes(body).map_err(|_| FrameError::Decode)?;
-    Ok((env.seq, env.msg))
+    // Exactly one envelope: trailing bytes are not a message of this version.
+    match postcard::take_from_bytes::<Envelope<T>>(body) {
+        Ok((env, [])) => Ok((env.seq, env.msg)),
+        _ => Err(FrameError::Decode),
+    }
 }
 
 /// Collects bytes from the link into frames: resynchronises on the zero delimiter and
@@ -649,6 +653,35 @@ mod tests {
             .filter_map(|&b| rx.push(b).map(|r| r.map(|f| f.len())))
             .next();
         assert!(matches!(r, Some(Ok(_))));
+    }
+
+    /// A frame holds exactly one envelope: bytes after it (under a valid CRC) are refused.
+    #[test]
+    fn trailing_bytes_are_refused() {
+        let msg = ToController::Command(Command::Abort);
+        let mut raw = [0u8; 16];
+        let n = postcard::to_slice(&Envelope { seq: 5, msg: &msg }, &mut raw)
+            .unwrap()
+            .len();
+        for extra in [0u8, 1, 0x80] {
+            let mut body = std::vec::Vec::from(&raw[..n]);
+            body.push(extra);
+            let crc = crc16(&body).to_le_bytes();
+            body.extend_from_slice(&crc);
+            let mut frame = [0u8; 32];
+            let k = cobs::encode(&body, &mut frame);
+            assert_eq!(
+                decode::<ToController>(&mut frame[..k]),
+                Err(FrameError::Decode),
+                "trailing {extra:#04x}"
+            );
+        }
+        // Without the extra byte the same construction decodes.
+        let mut body = std::vec::Vec::from(&raw[..n]);
+        body.extend_from_slice(&crc16(&raw[..n]).to_le_bytes());
+        let mut frame = [0u8; 32];
+        let k = cobs::encode(&body, &mut frame);
+        assert_eq!(decode(&mut frame[..k]), Ok((5, msg)));
     }
 
     /// The largest messages of each direction encode to exactly their derived maxima.
