@@ -17,8 +17,8 @@ Everything is written here from the specifications:
   variant's payload (nothing / the newtype's value / the struct's fields); sequences
   varint(length) then the elements; arrays, tuples and structs element by element,
   no length, no field names.
-* CRC-16/CCITT-FALSE: poly 0x1021, init 0xFFFF, no reflection, no final xor (check
-  value 0x29B1 for b"123456789"), appended little-endian.
+* CRC-32/ISO-HDLC (zlib.crc32): reflected poly 0xEDB88320, init/xorout 0xFFFFFFFF (check
+  value 0xCBF43926 for b"123456789"), appended little-endian.
 * COBS (Cheshire & Baker 1999): blocks of code byte n (1..=255) then n-1 non-zero
   bytes; n < 255 stands for a zero after the block, except at the end of the
   payload; a run of 254 non-zero bytes gives code 0xFF with no zero implied.
@@ -45,6 +45,7 @@ import platform
 import random
 import struct
 import sys
+import zlib
 
 SCRIPT = "tests/golden/gen_wire.py"
 OUT = os.path.join("tests", "fixtures", "golden", "wire.json")
@@ -78,14 +79,10 @@ def f32(x):
     return struct.unpack("<f", struct.pack("<f", x))[0]
 
 
-def crc16(data):
-    crc = 0xFFFF
-    for b in data:
-        crc ^= b << 8
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1021) if crc & 0x8000 else (crc << 1)
-            crc &= 0xFFFF
-    return crc
+def crc32(data):
+    """CRC-32/ISO-HDLC from the standard library's zlib (an implementation independent of
+    the core's bitwise one)."""
+    return zlib.crc32(bytes(data)) & 0xFFFFFFFF
 
 
 def cobs_encode(data):
@@ -160,7 +157,8 @@ TEMPLATE_SHAPE = Struct(("origin", P3), ("axes", Array(F32, 9)), ("spread", P3),
 POSE_W = Struct(("t_us", U64), ("position", P3), ("quat", Array(F32, 4)))
 FRAME_W = Struct(("t_us", U64), ("frame", U32), ("pixels", Seq(Array(U16, 2), 96)))
 COMMAND = Enum("Command", ("StartSweep", None), ("EndSweep", None), ("Register", None),
-               ("Execute", None), ("Abort", None), ("Status", None), ("Result", None))
+               ("Execute", None), ("Abort", None), ("Status", None), ("Result", None),
+               ("Cost", None))
 TO_CONTROLLER = Enum(
     "ToController",
     ("Hello", Struct(("magic", U32), ("version", U16))),
@@ -181,6 +179,9 @@ STATUS_W = Struct(("state", STATE), ("expected_seq", U16), ("poses", U32), ("fra
                   ("frames_refused", U32), ("points", U16), ("progress", U8), ("waypoint", U8))
 WAYPOINT_W = Struct(("index", U8), ("total", U8), ("position", P3), ("quality_mm", F32))
 SETPOINT_W = Struct(("t_us", U64), ("position", P3), ("quat", Array(F32, 4)), ("waypoint", U8))
+COST_W = Struct(("registration_instructions", U64), ("registration_calls", U32),
+                ("worst_call_instructions", U32), ("worst_step_instructions", U32),
+                ("worst_receive_instructions", U32), ("peak_stack_bytes", U32))
 FROM_CONTROLLER = Enum(
     "FromController",
     ("HelloAck", Struct(("magic", U32), ("version", U16), ("max_frame", U16))),
@@ -190,6 +191,7 @@ FROM_CONTROLLER = Enum(
     ("Waypoint", WAYPOINT_W),
     ("Setpoint", SETPOINT_W),
     ("Fault", FAULT),
+    ("Cost", COST_W),
 )
 DIRECTIONS = {"to_controller": TO_CONTROLLER, "from_controller": FROM_CONTROLLER}
 
@@ -328,8 +330,8 @@ def max_cobs(n):
 
 def frame_of(direction, seq, msg, seen=None):
     post = enc(envelope(DIRECTIONS[direction]), {"seq": seq, "msg": msg}, seen)
-    crc = crc16(post)
-    body = post + crc.to_bytes(2, "little")
+    crc = crc32(post)
+    body = post + crc.to_bytes(4, "little")
     return post, crc, cobs_encode(body) + b"\x00"
 
 
@@ -345,7 +347,7 @@ def self_checks():
         assert zigzag32(v) == z, v
     assert struct.pack("<f", -0.0).hex() == "00000080"
     assert struct.pack("<f", 1.0).hex() == "0000803f"
-    assert crc16(b"123456789") == 0x29B1
+    assert crc32(b"123456789") == 0xCBF43926
     assert MAGIC == 0x47524252
     # COBS: examples from Cheshire & Baker / Wikipedia, then random round trips.
     for raw, h in ((b"\x00", "0101"), (b"\x00\x00", "010101"), (b"\x11\x22\x00\x33", "0311220233"),
@@ -460,7 +462,7 @@ def cases():
     add("frame_empty", "a frame with no bone pixels, time 0", to, 7,
         {"Frame": {"t_us": 0, "frame": 0, "pixels": []}})
     for i, (c, _) in enumerate(COMMAND[2]):
-        add("command_" + snake(c), f"Command::{c}", to, [1, 0x7F, 0x80, 300, 0x3FFF, 0x4000, 0xFFFF][i],
+        add("command_" + snake(c), f"Command::{c}", to, [1, 0x7F, 0x80, 300, 0x3FFF, 0x4000, 0xFFFF, 2][i],
             {"Command": c})
 
     add("hello_ack", "handshake answer, sequence 0", fr, 0,
@@ -492,6 +494,10 @@ def cases():
     add("fault_pose_timeout", "Fault::PoseTimeout", fr, 0x7F, {"Fault": "PoseTimeout"})
     add("fault_registration", "Fault::Registration(10): core error RigidFit", fr, 0x80,
         {"Fault": {"Registration": 10}})
+    add("cost", "measured costs: u64 and u32 varints of several lengths", fr, 0x4000,
+        {"Cost": {"registration_instructions": 123_456_789_012, "registration_calls": 1093,
+                  "worst_call_instructions": 141_233, "worst_step_instructions": 0,
+                  "worst_receive_instructions": 0xFFFF_FFFF, "peak_stack_bytes": 127}})
 
     # COBS edges (found by search; the script asserts the property each is made for).
     add("cobs_tail_254", "payload ends in a run of exactly 254 non-zero bytes: a final 0xFF "
@@ -507,14 +513,14 @@ def snake(name):
 
 def cobs_tail_254():
     """Frame message whose payload (envelope + CRC) ends in exactly 254 non-zero bytes:
-    a pixel with v = 0 (one zero byte), then 63 pixels of 2-byte varints (252 bytes), then
-    the CRC (2 bytes, searched to be non-zero)."""
+    a pixel with v = 0 (one zero byte), then 62 pixels of 2-byte varints (248 bytes), one
+    pixel of 1-byte varints (2 bytes), then the CRC (4 bytes, searched to be non-zero)."""
     for t in range(1000, 100000):
         px = [[200 + 16 * i, 300 + 16 * i] for i in range(16)] + [[4000, 0]]
-        px += [[1000 + 16 * i, 2000 + 16 * i] for i in range(63)]
+        px += [[1000 + 16 * i, 2000 + 16 * i] for i in range(62)] + [[5, 7]]
         msg = {"Frame": {"t_us": t, "frame": 99, "pixels": px}}
         post, crc, fr = frame_of("to_controller", 0x1234, msg)
-        body = post + crc.to_bytes(2, "little")
+        body = post + crc.to_bytes(4, "little")
         if 0 not in body[-254:] and body[-255] == 0:
             enc = fr[:-1]
             assert cobs_decode(enc) == body
@@ -556,7 +562,7 @@ def main():
         # Independent read-back: COBS decode, CRC, postcard parse.
         assert fr[-1] == 0 and 0 not in fr[:-1]
         body = cobs_decode(fr[:-1])
-        assert body[:-2] == post and int.from_bytes(body[-2:], "little") == crc16(post)
+        assert body[:-4] == post and int.from_bytes(body[-4:], "little") == crc32(post)
         val, end = dec(schema, post, 0)
         assert end == len(post) and val == {"seq": c["seq"], "msg": c["message"]}, c["name"]
         c["postcard"] = post.hex()
@@ -573,14 +579,14 @@ def main():
 
     max_to = max_size(TO_CONTROLLER)
     max_from = max_size(FROM_CONTROLLER)
-    max_frame = max_cobs(max(max_to, max_from) + max_size(U16) + 2) + 1
+    max_frame = max_cobs(max(max_to, max_from) + max_size(U16) + 4) + 1
     by_name = {c["name"]: c for c in doc_cases}
     assert len(bytes.fromhex(by_name["frame_max"]["postcard"])) == max_size(U16) + max_to
     assert by_name["frame_max"]["frame_len"] == max_frame
     assert len(bytes.fromhex(by_name["setpoint_max"]["postcard"])) == max_size(U16) + max_from
 
     gen = {"script": SCRIPT, "python": platform.python_version()}
-    constants = {"magic": MAGIC, "version": VERSION, "crc_check_123456789": crc16(b"123456789"),
+    constants = {"magic": MAGIC, "version": VERSION, "crc_check_123456789": crc32(b"123456789"),
                  "max_to_controller": max_to, "max_from_controller": max_from, "max_frame": max_frame}
     text = ('{"generator":' + json.dumps(gen, separators=(",", ":"))
             + ',\n"constants":' + json.dumps(constants, separators=(",", ":"))

@@ -3,7 +3,7 @@
 //!
 //! # Golden vectors
 //! `tests/fixtures/golden/wire.json` is written by `tests/golden/gen_wire.py`, a Python
-//! script of the standard library only (its own postcard encoder, CRC-16/CCITT-FALSE and
+//! script of the standard library only (its own postcard encoder, CRC-32/ISO-HDLC (zlib's) and
 //! COBS, written from the specifications; no postcard package). Regenerate it from the
 //! repository root with Python 3.11 (the checked-in file was made with Python 3.11.7,
 //! recorded in the file under `"generator"`):
@@ -35,12 +35,14 @@
 //!                       first after the burst)
 //! ```
 //!
-//! A flipped bit in a COBS *data* byte changes one byte of the CRC'd bytes, which CRC-16
+//! A flipped bit in a COBS *data* byte changes one byte of the CRC'd bytes, which the CRC
 //! always detects. A flipped bit in a COBS *code* byte, or a dropped byte, moves zeros and
-//! shifts bytes: a multi-byte error that CRC-16 alone misses with probability about 2⁻¹⁶
-//! (invalid COBS catches most code-byte flips and about a third of the drops first). So
-//! those are not guaranteed; the corruption test holds them to 100 % over its fixed cases
-//! (600 messages, ~46,000 bytes) and prints the counts and which check refused each.
+//! shifts bytes: a multi-byte error that a 32-bit CRC misses with probability about 2⁻³²
+//! (invalid COBS catches most code-byte flips and about a third of the drops first). The
+//! first protocol draft used CRC-16, which this test caught missing one dropped byte in
+//! 42,589 (2⁻¹⁶ ≈ 1 in 65,536); the corruption test holds all of them to 100 % over its
+//! fixed cases (600 messages, ~46,000 bytes) and prints the counts and which check
+//! refused each.
 
 use proptest::collection::vec;
 use proptest::prelude::*;
@@ -48,9 +50,10 @@ use proptest::sample::{select, Index};
 use proptest::strategy::ValueTree;
 use proptest::test_runner::{FileFailurePersistence, TestRunner};
 use ribreg_core::wire::{
-    self, Command, Configure, Fault, FrameError, FrameW, FromController, NackCode, Node, PoseW,
-    ProbeW, Receiver, SetpointW, State, StatusW, TemplateShape, ToController, WaypointW, MAX_FRAME,
-    MAX_FRAME_PIXELS, MAX_FROM_CONTROLLER, MAX_TO_CONTROLLER, NODES_PER_CHUNK, WAYPOINTS_PER_CHUNK,
+    self, Command, Configure, CostW, Fault, FrameError, FrameW, FromController, NackCode, Node,
+    PoseW, ProbeW, Receiver, SetpointW, State, StatusW, TemplateShape, ToController, WaypointW,
+    MAX_FRAME, MAX_FRAME_PIXELS, MAX_FROM_CONTROLLER, MAX_TO_CONTROLLER, NODES_PER_CHUNK,
+    WAYPOINTS_PER_CHUNK,
 };
 use serde::de::DeserializeOwned;
 use serde::Serialize;
@@ -101,10 +104,10 @@ const TO_CONTROLLER: [&str; 8] = [
     "Frame",
     "Command",
 ];
-const FROM_CONTROLLER: [&str; 7] = [
-    "HelloAck", "Ack", "Nack", "Status", "Waypoint", "Setpoint", "Fault",
+const FROM_CONTROLLER: [&str; 8] = [
+    "HelloAck", "Ack", "Nack", "Status", "Waypoint", "Setpoint", "Fault", "Cost",
 ];
-const COMMANDS: [Command; 7] = [
+const COMMANDS: [Command; 8] = [
     Command::StartSweep,
     Command::EndSweep,
     Command::Register,
@@ -112,6 +115,7 @@ const COMMANDS: [Command; 7] = [
     Command::Abort,
     Command::Status,
     Command::Result,
+    Command::Cost,
 ];
 const STATES: [State; 7] = [
     State::Idle,
@@ -174,6 +178,7 @@ fn from_variants(m: &FromController, seen: &mut BTreeSet<String>) {
         }
         FromController::Waypoint(_) => "Waypoint",
         FromController::Setpoint(_) => "Setpoint",
+        FromController::Cost(_) => "Cost",
         FromController::Fault(f) => {
             seen.insert(format!(
                 "Fault::{}",
@@ -210,7 +215,7 @@ where
     let post = postcard::to_slice(&(seq, &msg), &mut buf).expect("postcard");
     assert_eq!(hex(post), hex(&want_postcard), "{name}: postcard bytes");
     assert_eq!(
-        u64::from(wire::crc16(post)),
+        u64::from(wire::crc32(post)),
         uint(&case["crc"]),
         "{name}: CRC"
     );
@@ -236,7 +241,7 @@ where
     assert_eq!(hex(&again[..m]), hex(&want_frame), "{name}: re-encoded");
     // The test's own COBS (used by the properties) agrees with the fixture.
     let mut payload = want_postcard.clone();
-    payload.extend_from_slice(&wire::crc16(&want_postcard).to_le_bytes());
+    payload.extend_from_slice(&wire::crc32(&want_postcard).to_le_bytes());
     assert_eq!(
         hex(&crc_frame_of_payload(&payload)),
         hex(&want_frame),
@@ -259,8 +264,8 @@ fn golden_constants() {
     assert_eq!(uint(&c["magic"]), u64::from(wire::MAGIC));
     assert_eq!(wire::MAGIC, 0x4752_4252);
     assert_eq!(uint(&c["version"]), u64::from(wire::VERSION));
-    assert_eq!(uint(&c["crc_check_123456789"]), 0x29B1);
-    assert_eq!(wire::crc16(b"123456789"), 0x29B1);
+    assert_eq!(uint(&c["crc_check_123456789"]), 0xCBF4_3926);
+    assert_eq!(wire::crc32(b"123456789"), 0xCBF4_3926);
     // The maxima the script derives from its own schemas and reaches with actual messages.
     assert_eq!(
         uint(&c["max_to_controller"]) as usize,
@@ -346,7 +351,7 @@ fn crc_frame_of_payload(payload: &[u8]) -> Vec<u8> {
 /// A frame of arbitrary bytes under a valid CRC (reaches postcard's decoder).
 fn crc_frame(body: &[u8]) -> Vec<u8> {
     let mut p = body.to_vec();
-    p.extend_from_slice(&wire::crc16(body).to_le_bytes());
+    p.extend_from_slice(&wire::crc32(body).to_le_bytes());
     crc_frame_of_payload(&p)
 }
 
@@ -622,6 +627,16 @@ fn from_controller() -> BoxedStrategy<FromController> {
         waypoint,
         setpoint,
         fault.prop_map(FromController::Fault),
+        (u64s(), u32s(), u32s(), u32s(), u32s(), u32s()).prop_map(|(a, b, c, d, e, f)| {
+            FromController::Cost(CostW {
+                registration_instructions: a,
+                registration_calls: b,
+                worst_call_instructions: c,
+                worst_step_instructions: d,
+                worst_receive_instructions: e,
+                peak_stack_bytes: f,
+            })
+        }),
     ]
     .boxed()
 }
