@@ -72,6 +72,35 @@ impl<const CAP: usize> VoxelCloud<CAP> {
     /// An empty cloud with finest voxel edge `voxel_mm` (at least [`MIN_VOXEL_MM`]) that
     /// may coarsen `max_coarsenings` times.
     pub fn new(voxel_mm: f32, max_coarsenings: u8) -> Result<Self> {
+        let mut cloud = Self::empty();
+        cloud.reset(voxel_mm, max_coarsenings)?;
+        Ok(cloud)
+    }
+
+    /// An empty cloud of 1 mm voxels that may not coarsen, built at compile time (a
+    /// `static` on the controller: no stack copy of its arrays).
+    pub const fn empty() -> Self {
+        VoxelCloud {
+            codes: [0; CAP],
+            sums: [Vec3::new(0.0, 0.0, 0.0); CAP],
+            counts: [0; CAP],
+            len: 0,
+            finest_mm: 1.0,
+            level: 0,
+            max_level: 0,
+            finished: false,
+            stats: VoxelStats {
+                accepted: 0,
+                merged: 0,
+                refused_full: 0,
+                coarsenings: 0,
+            },
+        }
+    }
+
+    /// Empties the cloud in place for new settings (see [`VoxelCloud::new`]); on a
+    /// configuration error it is left unchanged.
+    pub fn reset(&mut self, voxel_mm: f32, max_coarsenings: u8) -> Result<()> {
         if !(MIN_VOXEL_MM..=1000.0).contains(&voxel_mm) {
             return Err(Error::Config("voxel size must be between 0.1 and 1000 mm"));
         }
@@ -80,17 +109,13 @@ impl<const CAP: usize> VoxelCloud<CAP> {
                 "voxel cloud needs a capacity and at most 16 coarsenings",
             ));
         }
-        Ok(VoxelCloud {
-            codes: [0; CAP],
-            sums: [Vec3::new(0.0, 0.0, 0.0); CAP],
-            counts: [0; CAP],
-            len: 0,
-            finest_mm: voxel_mm,
-            level: 0,
-            max_level: max_coarsenings,
-            finished: false,
-            stats: VoxelStats::default(),
-        })
+        self.len = 0;
+        self.finest_mm = voxel_mm;
+        self.level = 0;
+        self.max_level = max_coarsenings;
+        self.finished = false;
+        self.stats = VoxelStats::default();
+        Ok(())
     }
 
     /// Occupied voxels.
@@ -289,18 +314,65 @@ impl<const POSES: usize, const VOXELS: usize> Compounder<POSES, VOXELS> {
         voxel_mm: f32,
         max_coarsenings: u8,
     ) -> Result<Self> {
+        let mut c = Self::empty();
+        c.reset(calibration, lag_s, voxel_mm, max_coarsenings)?;
+        Ok(c)
+    }
+
+    /// An idle compounder built at compile time (identity calibration of a 1×1-pixel
+    /// probe); [`Compounder::reset`] sets it up in place.
+    pub const fn empty() -> Self {
+        const IDENTITY: Rigid = Rigid {
+            rotation: nalgebra::Matrix3::from_array_storage(nalgebra::ArrayStorage([
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [0.0, 0.0, 1.0],
+            ])),
+            translation: Vec3::new(0.0, 0.0, 0.0),
+        };
+        Compounder {
+            calibration: Calibration {
+                probe: crate::probe::ProbeModel {
+                    width_px: 1,
+                    height_px: 1,
+                    footprint_mm: 1.0,
+                    depth_mm: 1.0,
+                },
+                tcp_t_us: IDENTITY,
+                ee_t_tcp: IDENTITY,
+            },
+            ee_t_us: IDENTITY,
+            lag_s: 0.0,
+            track: PoseTrack::new(),
+            cloud: VoxelCloud::empty(),
+            frames: FrameStats {
+                placed: 0,
+                outside_track: 0,
+                invalid: 0,
+            },
+        }
+    }
+
+    /// Empties the compounder in place for a new sweep with these settings (see
+    /// [`Compounder::new`]); on a configuration error it is left unchanged.
+    pub fn reset(
+        &mut self,
+        calibration: Calibration,
+        lag_s: f64,
+        voxel_mm: f32,
+        max_coarsenings: u8,
+    ) -> Result<()> {
         calibration.validate()?;
         if !(lag_s.is_finite() && libm::fabs(lag_s) <= 10.0) {
             return Err(Error::Config("lag must be finite and within ±10 s"));
         }
-        Ok(Compounder {
-            calibration,
-            ee_t_us: calibration.ee_t_us(),
-            lag_s,
-            track: PoseTrack::new(),
-            cloud: VoxelCloud::new(voxel_mm, max_coarsenings)?,
-            frames: FrameStats::default(),
-        })
+        self.cloud.reset(voxel_mm, max_coarsenings)?;
+        self.calibration = calibration;
+        self.ee_t_us = calibration.ee_t_us();
+        self.lag_s = lag_s;
+        self.track.clear();
+        self.frames = FrameStats::default();
+        Ok(())
     }
 
     /// The lag in use, s.

@@ -116,7 +116,8 @@ pub struct Controller<const VOXELS: usize> {
     template: Option<Template>,
     waypoints: heapless::Vec<Vec3, MAX_WAYPOINTS>,
     waypoints_total: u8,
-    sweep: Option<Compounder<TRACK_CAPACITY, VOXELS>>,
+    sweep: Compounder<TRACK_CAPACITY, VOXELS>,
+    swept: bool,
     cloud_ready: bool,
     probe_sum: Vec3,
     probe_count: u32,
@@ -156,7 +157,8 @@ impl<const VOXELS: usize> Controller<VOXELS> {
             template: None,
             waypoints: heapless::Vec::new(),
             waypoints_total: 0,
-            sweep: None,
+            sweep: Compounder::empty(),
+            swept: false,
             cloud_ready: false,
             probe_sum: Vec3::new(0.0, 0.0, 0.0),
             probe_count: 0,
@@ -197,10 +199,7 @@ impl<const VOXELS: usize> Controller<VOXELS> {
 
     /// The compounded cloud once the sweep has ended (robot base frame).
     pub fn cloud(&mut self) -> Option<&[Vec3]> {
-        match (&mut self.sweep, self.cloud_ready) {
-            (Some(s), true) => Some(s.cloud.finish()),
-            _ => None,
-        }
+        self.cloud_ready.then(|| self.sweep.cloud.finish())
     }
 
     /// The next reply to send, with its sequence number.
@@ -396,8 +395,7 @@ impl<const VOXELS: usize> Controller<VOXELS> {
                         f32::from(p[1]) / PIXEL_SUBDIVISIONS,
                     ];
                 }
-                let sweep = self.sweep.as_mut().ok_or(NackCode::BadState)?;
-                sweep
+                self.sweep
                     .add_frame(f.t_us as f64 * 1e-6, &pixels[..f.pixels.len()])
                     .map(|_| ())
                     .map_err(invalid)
@@ -421,9 +419,9 @@ impl<const VOXELS: usize> Controller<VOXELS> {
 
     fn pose(&mut self, p: &PoseW, now_us: u64) -> Result<()> {
         let pose = TrackedPose::new(p.t_us as f64 * 1e-6, Vec3::from(p.position), p.quat)?;
-        if let Some(sweep) = &mut self.sweep {
+        {
             if self.state == State::Sweeping {
-                sweep.add_pose(pose)?;
+                self.sweep.add_pose(pose)?;
                 if let Some(s) = &self.settings {
                     let tcp = pose.to_rigid().after(&s.calibration.ee_t_tcp);
                     self.probe_sum += tcp.translation;
@@ -444,10 +442,10 @@ impl<const VOXELS: usize> Controller<VOXELS> {
                 self.require(&[TemplateLoaded, Ready, Done])?;
                 // Note(unwrap-free): TemplateLoaded implies settings.
                 let s = self.settings.ok_or(NackCode::BadState)?;
-                self.sweep = Some(
-                    Compounder::new(s.calibration, s.lag_s, s.voxel_mm, DEFAULT_MAX_COARSENINGS)
-                        .map_err(invalid)?,
-                );
+                self.sweep
+                    .reset(s.calibration, s.lag_s, s.voxel_mm, DEFAULT_MAX_COARSENINGS)
+                    .map_err(invalid)?;
+                self.swept = true;
                 self.cloud_ready = false;
                 self.probe_sum = Vec3::zeros();
                 self.probe_count = 0;
@@ -458,19 +456,17 @@ impl<const VOXELS: usize> Controller<VOXELS> {
             }
             Command::EndSweep => {
                 self.require(&[Sweeping])?;
-                if let Some(s) = &mut self.sweep {
-                    s.cloud.finish();
-                }
+                self.sweep.cloud.finish();
                 self.cloud_ready = true;
                 self.state = TemplateLoaded;
                 Ok(())
             }
             Command::Register => {
                 self.require(&[TemplateLoaded])?;
-                let cloud = match (&mut self.sweep, self.cloud_ready) {
-                    (Some(s), true) => s.cloud.finish(),
-                    _ => return Err(NackCode::BadState),
-                };
+                if !self.cloud_ready {
+                    return Err(NackCode::BadState);
+                }
+                let cloud = self.sweep.cloud.finish();
                 if cloud.len() < MIN_CLOUD_POINTS {
                     return Err(invalid(Error::TooFewPoints {
                         cloud: crate::error::Cloud::Target,
@@ -536,13 +532,16 @@ impl<const VOXELS: usize> Controller<VOXELS> {
 
     /// Current status.
     pub fn status(&self) -> StatusW {
-        let (placed, refused, points) = self.sweep.as_ref().map_or((0, 0, 0), |s| {
+        let s = &self.sweep;
+        let (placed, refused, points) = if self.swept {
             (
                 s.frames.placed,
                 s.frames.outside_track.saturating_add(s.frames.invalid),
                 s.cloud.len().min(usize::from(u16::MAX)) as u16,
             )
-        });
+        } else {
+            (0, 0, 0)
+        };
         let progress = match (&self.registering, self.state) {
             (Some(r), State::Registering) => {
                 let (done, total) = r.progress(&Config::improved());
@@ -575,13 +574,11 @@ impl<const VOXELS: usize> Controller<VOXELS> {
 
     fn register_step(&mut self) {
         let cfg = Config::improved();
-        let (Some(r), Some(template), Some(sweep)) =
-            (&mut self.registering, &self.template, &mut self.sweep)
-        else {
+        let (Some(r), Some(template)) = (&mut self.registering, &self.template) else {
             self.state = State::TemplateLoaded;
             return;
         };
-        let cloud = sweep.cloud.finish();
+        let cloud = self.sweep.cloud.finish();
         match r.step(template, cloud, &cfg, SOM_ITERATIONS_PER_POLL) {
             Ok(None) => {}
             Ok(Some(reg)) => {
@@ -617,10 +614,7 @@ impl<const VOXELS: usize> Controller<VOXELS> {
         } else {
             Vec3::zeros()
         };
-        let cloud: &[Vec3] = match &mut self.sweep {
-            Some(sw) => sw.cloud.finish(),
-            None => &[],
-        };
+        let cloud: &[Vec3] = self.sweep.cloud.finish();
         let mut targets = heapless::Vec::new();
         for w in &self.waypoints {
             let (t, quality_mm) = reg.map.transform_with_residual(w)?;

@@ -135,6 +135,14 @@ impl<const N: usize> PoseTrack<N> {
         }
     }
 
+    /// Forgets every pose (and the counters).
+    pub fn clear(&mut self) {
+        self.head = 0;
+        self.len = 0;
+        self.received = 0;
+        self.refused = 0;
+    }
+
     /// Poses held.
     pub fn len(&self) -> usize {
         self.len
