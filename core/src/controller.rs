@@ -46,6 +46,14 @@ use crate::wire::{
 use crate::Vec3;
 use nalgebra::{Matrix3, Rotation3, SymmetricEigen, UnitQuaternion};
 
+/// Voxel capacity of the controller's compounding cloud: 1536 × 24 B = 36 KiB, so that
+/// the registration's stack (about 47 KiB at its deepest, from the firmware's frame sizes)
+/// fits beside the controller in 128 KiB of RAM. A whole-chest sweep fits it at 6 mm
+/// voxels ([`CONTROLLER_VOXEL_MM`] coarsened once).
+pub const CONTROLLER_VOXELS: usize = 1536;
+/// Finest voxel edge the robot PC configures for the controller, mm.
+pub const CONTROLLER_VOXEL_MM: f32 = 3.0;
+
 /// Robot poses may pause this long while executing before setpoints stop, µs.
 pub const POSE_TIMEOUT_US: u64 = 50_000;
 /// Setpoint period while executing, µs (100 Hz).
@@ -122,7 +130,6 @@ pub struct Controller<const VOXELS: usize> {
     probe_sum: Vec3,
     probe_count: u32,
     registering: Option<Registering>,
-    registration: Option<Registration>,
     targets: heapless::Vec<ProbeTarget, MAX_WAYPOINTS>,
     last_pose: Option<(u64, Rigid)>,
     poses: u32,
@@ -163,7 +170,6 @@ impl<const VOXELS: usize> Controller<VOXELS> {
             probe_sum: Vec3::new(0.0, 0.0, 0.0),
             probe_count: 0,
             registering: None,
-            registration: None,
             targets: heapless::Vec::new(),
             last_pose: None,
             poses: 0,
@@ -300,6 +306,7 @@ impl<const VOXELS: usize> Controller<VOXELS> {
         }
     }
 
+    #[inline(never)]
     fn apply(&mut self, msg: ToController, now_us: u64) -> core::result::Result<(), NackCode> {
         use State::*;
         let invalid = |e: Error| NackCode::Invalid(error_code(&e));
@@ -434,6 +441,7 @@ impl<const VOXELS: usize> Controller<VOXELS> {
         Ok(())
     }
 
+    #[inline(never)]
     fn command(&mut self, c: Command, now_us: u64) -> core::result::Result<(), NackCode> {
         use State::*;
         let invalid = |e: Error| NackCode::Invalid(error_code(&e));
@@ -449,7 +457,6 @@ impl<const VOXELS: usize> Controller<VOXELS> {
                 self.cloud_ready = false;
                 self.probe_sum = Vec3::zeros();
                 self.probe_count = 0;
-                self.registration = None;
                 self.targets.clear();
                 self.state = Sweeping;
                 Ok(())
@@ -474,10 +481,9 @@ impl<const VOXELS: usize> Controller<VOXELS> {
                         min: MIN_CLOUD_POINTS as u32,
                     }));
                 }
-                self.registering = Some(
-                    crate::pipeline::Registering::start(cloud, &Config::improved())
-                        .map_err(invalid)?,
-                );
+                // The registration starts in the next poll (its set-up is a bounded step
+                // of its own, and keeps this handler's stack frame small).
+                self.registering = None;
                 self.state = Registering;
                 Ok(())
             }
@@ -572,20 +578,36 @@ impl<const VOXELS: usize> Controller<VOXELS> {
         }
     }
 
+    #[inline(never)]
     fn register_step(&mut self) {
         let cfg = Config::improved();
+        if self.registering.is_none() {
+            self.start_registration(&cfg);
+            return;
+        }
         let (Some(r), Some(template)) = (&mut self.registering, &self.template) else {
             self.state = State::TemplateLoaded;
             return;
         };
         let cloud = self.sweep.cloud.finish();
         match r.step(template, cloud, &cfg, SOM_ITERATIONS_PER_POLL) {
-            Ok(None) => {}
-            Ok(Some(reg)) => {
+            Ok(false) => {}
+            Ok(true) => {
+                let mapped = match r.registration() {
+                    Some(reg) => targets(
+                        reg,
+                        &self.waypoints,
+                        cloud,
+                        self.settings.as_ref(),
+                        self.probe_sum,
+                        self.probe_count,
+                        &mut self.targets,
+                    ),
+                    None => Err(Error::Config("the registration did not finish")),
+                };
                 self.registering = None;
-                match self.targets_from(&reg) {
+                match mapped {
                     Ok(()) => {
-                        self.registration = Some(reg);
                         self.state = State::Ready;
                         let _ = self.command(Command::Result, 0);
                     }
@@ -599,36 +621,19 @@ impl<const VOXELS: usize> Controller<VOXELS> {
         }
     }
 
+    #[inline(never)]
+    fn start_registration(&mut self, cfg: &Config) {
+        match crate::pipeline::Registering::start(self.sweep.cloud.finish(), cfg) {
+            Ok(r) => self.registering = Some(r),
+            Err(e) => self.fail(e),
+        }
+    }
+
     fn fail(&mut self, e: Error) {
         self.state = State::TemplateLoaded;
         self.send(FromController::Fault(crate::wire::Fault::Registration(
             error_code(&e),
         )));
-    }
-
-    /// Maps the waypoints and turns them into probe targets.
-    fn targets_from(&mut self, reg: &Registration) -> Result<()> {
-        let s = self.settings.ok_or(Error::Config("no configuration"))?;
-        let skin = if self.probe_count > 0 {
-            self.probe_sum / self.probe_count as f32
-        } else {
-            Vec3::zeros()
-        };
-        let cloud: &[Vec3] = self.sweep.cloud.finish();
-        let mut targets = heapless::Vec::new();
-        for w in &self.waypoints {
-            let (t, quality_mm) = reg.map.transform_with_residual(w)?;
-            let p = t.apply(w);
-            let tcp = probe_pose(cloud, &p, &skin, s.standoff);
-            // Note: at most MAX_WAYPOINTS waypoints, the capacity.
-            let _ = targets.push(ProbeTarget {
-                waypoint: p,
-                tcp,
-                quality_mm,
-            });
-        }
-        self.targets = targets;
-        Ok(())
     }
 
     fn execute(&mut self, now_us: u64) {
@@ -696,6 +701,38 @@ impl<const VOXELS: usize> Controller<VOXELS> {
             }
         }
     }
+}
+
+/// Maps the waypoints and turns them into probe targets (into `out`).
+#[inline(never)]
+fn targets(
+    reg: &Registration,
+    waypoints: &[Vec3],
+    cloud: &[Vec3],
+    settings: Option<&Settings>,
+    probe_sum: Vec3,
+    probe_count: u32,
+    out: &mut heapless::Vec<ProbeTarget, MAX_WAYPOINTS>,
+) -> Result<()> {
+    let s = settings.ok_or(Error::Config("no configuration"))?;
+    let skin = if probe_count > 0 {
+        probe_sum / probe_count as f32
+    } else {
+        Vec3::zeros()
+    };
+    out.clear();
+    for w in waypoints {
+        let (t, quality_mm) = reg.map.transform_with_residual(w)?;
+        let p = t.apply(w);
+        let tcp = probe_pose(cloud, &p, &skin, s.standoff);
+        // Note: at most MAX_WAYPOINTS waypoints, the capacity.
+        let _ = out.push(ProbeTarget {
+            waypoint: p,
+            tcp,
+            quality_mm,
+        });
+    }
+    Ok(())
 }
 
 fn finite(p: &[f32; 3]) -> bool {

@@ -89,6 +89,7 @@ pub fn match_endpoints(
 
 /// Rigid pose taking `src` onto `dst` from five starts (see the module docs), whatever
 /// their relative pose; `fs`, `fd` are their principal axes. Returns the pose and RMS.
+#[inline(never)]
 pub fn coarse_pose(src: &[Vec3], fs: &Frame, dst: &[Vec3], fd: &Frame) -> Result<(Rigid, f32)> {
     let mut best: Option<(Rigid, f32)> = None;
     for start in 0..5 {
@@ -124,6 +125,7 @@ pub const ICP_CAPACITY: usize = crate::skeleton::SOM1_CAPACITY;
 
 /// Point-to-point ICP of `src` (at most [`ICP_CAPACITY`] points) onto `dst` from `pose`,
 /// `iterations` rounds; returns the pose and the RMS of the last pairing.
+#[inline(never)]
 pub fn icp(src: &[Vec3], dst: &[Vec3], mut pose: Rigid, iterations: usize) -> Result<(Rigid, f32)> {
     if src.len() > ICP_CAPACITY {
         return Err(crate::error::Error::Capacity {

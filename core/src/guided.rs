@@ -96,6 +96,7 @@ pub const FIT_SAMPLES: usize = 16_384;
 /// from the nodes: the outermost *points* would follow every noisy or outlying point
 /// that lands near a rib's end (measured on the phantoms: 3.5 mm mean waypoint error
 /// with point extents, 2.9 mm with node extents). One streaming pass, no buffer.
+#[inline(never)]
 pub fn fit_ribs(
     cloud: &[Vec3],
     nodes: &[Vec3],
@@ -178,6 +179,7 @@ pub fn fit_ribs(
 
 /// Target skeleton paired with `template_skeleton`, guided by the template's labelled
 /// nodes. Returns the rigid pose target → template and the 30 target points.
+#[inline(never)]
 pub fn target_skeleton(
     cloud: &[Vec3],
     target: &SkeletonGraph,

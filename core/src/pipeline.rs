@@ -226,19 +226,19 @@ pub struct Registration {
 /// Map points through the result with [`LocalRigid::map_in_place`] on `.map`.
 pub fn register(template: &Template, target: &[Vec3], cfg: &Config) -> Result<Registration> {
     let mut r = Registering::start(target, cfg)?;
-    loop {
-        if let Some(reg) = r.step(template, target, cfg, u32::MAX)? {
-            return Ok(reg);
-        }
-    }
+    while !r.step(template, target, cfg, u32::MAX)? {}
+    r.into_registration()
+        .ok_or(Error::Config("the registration did not finish"))
 }
 
 /// A registration in progress, for callers that must bound the work per call (the
 /// controller's 100 Hz loop): the target's skeleton graph is built at most `budget` SOM
 /// iterations per [`Registering::step`] (a stage change is a call of its own), and the
-/// rib skeleton and mapping take one last call. The result equals [`register`]'s.
+/// rib skeleton and mapping take one last call. The result equals [`register`]'s and is
+/// kept inside (nothing of kilobytes passes through the caller's stack).
 pub struct Registering {
     graph: GraphBuild,
+    result: Option<Registration>,
 }
 
 impl Registering {
@@ -247,6 +247,7 @@ impl Registering {
         validate(target, Cloud::Target, MIN_CLOUD_POINTS, MAX_CLOUD_POINTS)?;
         Ok(Registering {
             graph: GraphBuild::start(target, Cloud::Target, cfg, false)?,
+            result: None,
         })
     }
 
@@ -255,39 +256,60 @@ impl Registering {
         self.graph.progress(cfg)
     }
 
-    /// One bounded step; `Some(registration)` when done. `target` and `cfg` must be those
-    /// given to [`Registering::start`].
+    /// One bounded step; `true` when the registration is done
+    /// ([`Registering::registration`]). `target` and `cfg` must be those given to
+    /// [`Registering::start`].
+    #[inline(never)]
     pub fn step(
         &mut self,
         template: &Template,
         target: &[Vec3],
         cfg: &Config,
         budget: u32,
-    ) -> Result<Option<Registration>> {
-        match self.graph.step(target, cfg, budget)? {
-            None => Ok(None),
-            Some(graph) => finish(template, target, graph, cfg).map(Some),
+    ) -> Result<bool> {
+        if self.result.is_some() {
+            return Ok(true);
         }
+        if !self.graph.step(target, cfg, budget)? {
+            return Ok(false);
+        }
+        let graph = self
+            .graph
+            .graph()
+            .ok_or(Error::Config("the skeleton graph build did not finish"))?;
+        self.result = Some(finish(template, target, graph, cfg)?);
+        Ok(true)
+    }
+
+    /// The registration, once done.
+    pub fn registration(&self) -> Option<&Registration> {
+        self.result.as_ref()
+    }
+
+    /// The registration, once done.
+    pub fn into_registration(self) -> Option<Registration> {
+        self.result
     }
 }
 
 /// The rib skeleton of the target (endpoint matching or guided) and the mapping.
+#[inline(never)]
 fn finish(
     template: &Template,
     target: &[Vec3],
-    graph: SkeletonGraph,
+    graph: &SkeletonGraph,
     cfg: &Config,
 ) -> Result<Registration> {
     let (pose, matching, skeleton) = match (cfg.rib_model, &template.ends) {
         (RibModel::Graph, Some(ends)) => {
-            let matching = match_endpoints(&graph, &template.graph, ends)?;
-            let skeleton = RibSkeleton::build(&graph, &matching.ends, cfg, Cloud::Target)?;
+            let matching = match_endpoints(graph, &template.graph, ends)?;
+            let skeleton = RibSkeleton::build(graph, &matching.ends, cfg, Cloud::Target)?;
             (matching.pose, Some(matching), skeleton)
         }
         (RibModel::Guided, None) => {
             let (pose, points) = target_skeleton(
                 target,
-                &graph,
+                graph,
                 &template.graph,
                 &template.node_labels,
                 &template.skeleton.points,
@@ -312,7 +334,7 @@ fn finish(
     };
     let map = LocalRigid::new(template.skeleton.points, skeleton.points, cfg.neighbours)?;
     Ok(Registration {
-        graph,
+        graph: graph.clone(),
         pose,
         matching,
         skeleton,

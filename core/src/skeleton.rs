@@ -87,14 +87,13 @@ impl SkeletonGraph {
     /// oriented to it (used for the template); otherwise their signs are arbitrary.
     pub fn build(cloud: &[Vec3], which: Cloud, cfg: &Config, patient_frame: bool) -> Result<Self> {
         let mut b = GraphBuild::start(cloud, which, cfg, patient_frame)?;
-        loop {
-            if let Some(graph) = b.step(cloud, cfg, u32::MAX)? {
-                return Ok(graph);
-            }
-        }
+        while !b.step(cloud, cfg, u32::MAX)? {}
+        b.into_graph()
+            .ok_or(Error::Config("the skeleton graph build did not finish"))
     }
 
     /// MST, hull, midline and endpoints of the trained key points.
+    #[inline(never)]
     fn from_key_points(
         som1: heapless::Vec<Vec3, SOM1_CAPACITY>,
         key_points: heapless::Vec<Vec3, KEY_POINTS>,
@@ -163,7 +162,8 @@ enum GraphStage {
         Som<KEY_POINTS>,
         SomTrainer,
     ),
-    Done,
+    Done(SkeletonGraph),
+    Failed,
 }
 
 impl GraphBuild {
@@ -194,26 +194,22 @@ impl GraphBuild {
         match &self.stage {
             GraphStage::Som1(_, t) => (t.done(), total),
             GraphStage::Som2(_, _, t) => (cfg.som1.iterations + t.done(), total),
-            GraphStage::Done => (total, total),
+            GraphStage::Done(_) | GraphStage::Failed => (total, total),
         }
     }
 
     /// At most `budget` SOM iterations (a stage change — dead-unit pruning, the SOM-2
     /// initialisation, or MST/hull/endpoints at the end — counts as one call of its own);
-    /// `Some(graph)` when done. `cloud` and `cfg` must be those given to
-    /// [`GraphBuild::start`].
-    pub fn step(
-        &mut self,
-        cloud: &[Vec3],
-        cfg: &Config,
-        budget: u32,
-    ) -> Result<Option<SkeletonGraph>> {
+    /// `true` when the graph is built ([`GraphBuild::graph`]). `cloud` and `cfg` must be
+    /// those given to [`GraphBuild::start`]. The graph is built in place: nothing of
+    /// kilobytes passes through the caller's stack (the controller's 100 Hz loop).
+    #[inline(never)]
+    pub fn step(&mut self, cloud: &[Vec3], cfg: &Config, budget: u32) -> Result<bool> {
         let (som1, som2) = (&cfg.som1, &cfg.som2);
-        match core::mem::replace(&mut self.stage, GraphStage::Done) {
-            GraphStage::Som1(mut map, mut trainer) => {
-                if !trainer.run(&mut map, cloud, budget) {
-                    self.stage = GraphStage::Som1(map, trainer);
-                    return Ok(None);
+        match &mut self.stage {
+            GraphStage::Som1(map, trainer) => {
+                if !trainer.run(map, cloud, budget) {
+                    return Ok(false);
                 }
                 let mut live1 = heapless::Vec::new();
                 map.live_nodes(cloud, som1.seed, &mut live1)?;
@@ -223,19 +219,43 @@ impl GraphBuild {
                 })?;
                 let (map2, trainer2) = Som::<KEY_POINTS>::start(&live1, &frame1, som2)?;
                 self.stage = GraphStage::Som2(live1, map2, trainer2);
-                Ok(None)
+                Ok(false)
             }
-            GraphStage::Som2(live1, mut map, mut trainer) => {
-                if !trainer.run(&mut map, &live1, budget) {
-                    self.stage = GraphStage::Som2(live1, map, trainer);
-                    return Ok(None);
+            GraphStage::Som2(live1, map, trainer) => {
+                if !trainer.run(map, live1, budget) {
+                    return Ok(false);
                 }
                 let mut key_points = heapless::Vec::new();
-                map.live_nodes(&live1, som2.seed, &mut key_points)?;
-                SkeletonGraph::from_key_points(live1, key_points, self.which, self.patient_frame)
-                    .map(Some)
+                map.live_nodes(live1, som2.seed, &mut key_points)?;
+                let live1 = core::mem::take(live1);
+                self.stage = GraphStage::Failed;
+                let graph = SkeletonGraph::from_key_points(
+                    live1,
+                    key_points,
+                    self.which,
+                    self.patient_frame,
+                )?;
+                self.stage = GraphStage::Done(graph);
+                Ok(true)
             }
-            GraphStage::Done => Err(Error::Config("the skeleton graph is already built")),
+            GraphStage::Done(_) => Ok(true),
+            GraphStage::Failed => Err(Error::Config("the skeleton graph build failed before")),
+        }
+    }
+
+    /// The graph, once [`GraphBuild::step`] returned `true`.
+    pub fn graph(&self) -> Option<&SkeletonGraph> {
+        match &self.stage {
+            GraphStage::Done(g) => Some(g),
+            _ => None,
+        }
+    }
+
+    /// The graph, once built.
+    pub fn into_graph(self) -> Option<SkeletonGraph> {
+        match self.stage {
+            GraphStage::Done(g) => Some(g),
+            _ => None,
         }
     }
 }

@@ -1,10 +1,16 @@
 //! ribreg-firmware: the probe-positioning controller for `thumbv7em-none-eabihf`.
 //!
-//! For now a scaffold that proves the link, the UART driver and the cost counters under
-//! QEMU (`mps2-an386`): it echoes every byte it receives on UART0, and when the last four
-//! bytes received are `QUIT` it sends one `STATS ...` line (peak stack, uptime, counter
-//! calibration), logs the same through defmt and exits the emulator with success.
-//! The serial protocol replaces the echo loop; [`uart`] and [`cost`] stay.
+//! The main loop serves the robot PC over UART0 with the protocol of
+//! `ribreg_core::wire` and runs `ribreg_core::controller::Controller`: every turn it
+//! takes the bytes that arrived (each complete frame goes to the controller), calls the
+//! controller's bounded `poll` (one registration step, setpoints, the pose watchdog) and
+//! sends the replies. When there is nothing to do (not registering, not executing, no
+//! byte waiting) it sleeps in WFI until a byte arrives. Every call is measured in
+//! instructions with SysTick (`-icount shift=0`: 40 per tick) and the worst cases and the
+//! registration's total are reported on `Command::Cost`.
+//!
+//! A frame whose bytes are exactly `QUIT` (never valid COBS) ends the run: the firmware
+//! logs its measurements through defmt and exits the emulator with success.
 //!
 //! On the host this binary is only a stub that says how to build it for the target, so
 //! `cargo build --workspace` keeps working.
@@ -20,35 +26,13 @@ mod cost;
 #[allow(unsafe_code)]
 mod uart;
 
-/// The bytes that end the echo loop.
+/// The frame that ends the run.
 #[cfg(any(target_os = "none", test))]
 const QUIT: [u8; 4] = *b"QUIT";
 
 /// Iterations of [`cost::spin`] timed at boot (2 instructions each).
 #[cfg(any(target_os = "none", test))]
 const CALIBRATION_ITERATIONS: u32 = 10_000;
-
-/// Shifts `byte` into the window of the last four bytes; true when they spell [`QUIT`].
-#[cfg(any(target_os = "none", test))]
-fn push_and_check_quit(window: &mut [u8; 4], byte: u8) -> bool {
-    window.rotate_left(1);
-    window[3] = byte;
-    *window == QUIT
-}
-
-/// Writes `value` in decimal into `buf`, returning the digits (no `core::fmt`).
-#[cfg(any(target_os = "none", test))]
-fn decimal(mut value: u64, buf: &mut [u8; 20]) -> &[u8] {
-    let mut i = buf.len();
-    loop {
-        i -= 1;
-        buf[i] = b'0' + (value % 10) as u8;
-        value /= 10;
-        if value == 0 {
-            return &buf[i..];
-        }
-    }
-}
 
 #[cfg(not(target_os = "none"))]
 fn main() {
@@ -65,10 +49,13 @@ fn main() {
 mod app {
     use crate::cost::{self, Cost};
     use crate::uart::{Uart0, BAUDDIV_115200};
+    use core::sync::atomic::{AtomicBool, Ordering};
     use cortex_m_rt::{entry, exception, ExceptionFrame};
     use cortex_m_semihosting::debug;
     use defmt_semihosting as _;
-    use embedded_io::{Read, Write};
+    use embedded_io::{Read, ReadReady, Write};
+    use ribreg_core::controller::{Controller, CONTROLLER_VOXELS};
+    use ribreg_core::wire::{self, CostW, State};
 
     defmt::timestamp!("{=u64}", cost::now_ticks());
 
@@ -122,69 +109,110 @@ mod app {
         let Some(mut uart) = Uart0::take(BAUDDIV_115200) else {
             panic!("UART0 taken twice");
         };
-        let mut window = [0u8; 4];
-        let mut buf = [0u8; 32];
-        let mut echoed: u64 = 0;
+        let controller = controller();
+        let mut rx = wire::Receiver::new();
+        let mut out = [0u8; wire::MAX_FRAME];
+        let mut cost = CostW::default();
+        let mut reg_started = false;
         loop {
-            let n = match uart.read(&mut buf) {
-                Ok(n) => n,
-                Err(e) => {
-                    defmt::warn!("uart read: {}", e);
-                    continue;
+            let turn = Cost::start();
+            let now = now_us();
+            // 1. Every byte that has arrived; a complete frame goes to the controller.
+            while let Ok(true) = uart.read_ready() {
+                let mut byte = [0u8; 1];
+                if !matches!(uart.read(&mut byte), Ok(1)) {
+                    break;
                 }
-            };
-            if let Err(e) = uart.write_all(&buf[..n]) {
-                defmt::warn!("uart write: {}", e);
+                if let Some(frame) = rx.push(byte[0]) {
+                    if matches!(&frame, Ok(f) if **f == crate::QUIT[..]) {
+                        quit(&mut uart, boot, &cal, &cost);
+                    }
+                    let call = Cost::start();
+                    controller.receive(frame, now);
+                    let n = call.elapsed_instructions();
+                    cost.worst_receive_instructions = cost.worst_receive_instructions.max(clamp(n));
+                }
             }
-            echoed += n as u64;
-            if buf[..n]
-                .iter()
-                .any(|&b| crate::push_and_check_quit(&mut window, b))
-            {
-                quit(&mut uart, boot, &cal, echoed);
+            // 2. One bounded step of the periodic work.
+            let registering = controller.state() == State::Registering;
+            if registering && !reg_started {
+                cost.registration_instructions = 0;
+                cost.registration_calls = 0;
+                reg_started = true;
+            }
+            let step = Cost::start();
+            controller.poll(now_us());
+            let n = step.elapsed_instructions();
+            if registering {
+                cost.registration_instructions += n;
+                cost.registration_calls += 1;
+                cost.worst_step_instructions = cost.worst_step_instructions.max(clamp(n));
+            } else {
+                reg_started = false;
+            }
+            // 3. The replies.
+            while let Some((seq, msg)) = controller.next_reply() {
+                match wire::encode(seq, &msg, &mut out) {
+                    Ok(n) => {
+                        if let Err(e) = uart.write_all(&out[..n]) {
+                            defmt::warn!("uart write: {}", e);
+                        }
+                    }
+                    Err(e) => defmt::warn!("encode: {}", e),
+                }
+            }
+            cost.worst_call_instructions = cost
+                .worst_call_instructions
+                .max(clamp(turn.elapsed_instructions()));
+            cost.peak_stack_bytes = cost::peak_stack_bytes() as u32;
+            controller.set_cost(cost);
+            // 4. Nothing to do: sleep until a byte arrives.
+            let busy = matches!(controller.state(), State::Registering | State::Executing);
+            if !busy && !matches!(uart.read_ready(), Ok(true)) {
+                uart.wait_readable();
             }
         }
     }
 
-    /// Reports and leaves the emulator with success.
-    fn quit(uart: &mut Uart0, boot: cost::Stamp, cal: &Calibration, echoed: u64) -> ! {
-        let uptime_ticks = boot.elapsed_ticks();
-        let peak = cost::peak_stack_bytes();
-        let size = cost::stack_size_bytes();
-        defmt::info!(
-            "QUIT after {=u64} bytes echoed: peak stack {=usize} of {=usize} B, uptime {=u64} ticks ({=u64} ms of emulated time)",
-            echoed,
-            peak,
-            size,
-            uptime_ticks,
-            uptime_ticks / u64::from(cost::CORE_CLOCK_HZ / 1000)
-        );
-        let fields: [(&[u8], u64); 7] = [
-            (b"peak_stack_bytes", peak as u64),
-            (b"stack_size_bytes", size as u64),
-            (b"uptime_ticks", uptime_ticks),
-            (
-                b"spin_instructions",
-                2 * u64::from(crate::CALIBRATION_ITERATIONS),
-            ),
-            (b"spin_ticks", cal.spin_ticks),
-            (b"spin_measured_instructions", cal.spin_instructions),
-            (b"overhead_ticks", cal.overhead_ticks),
-        ];
-        let mut line = || -> Result<(), crate::uart::Error> {
-            uart.write_all(b"\nSTATS")?;
-            for (name, value) in fields {
-                uart.write_all(b" ")?;
-                uart.write_all(name)?;
-                uart.write_all(b"=")?;
-                uart.write_all(crate::decimal(value, &mut [0; 20]))?;
-            }
-            uart.write_all(b"\n")?;
-            uart.flush()
-        };
-        if let Err(e) = line() {
-            defmt::warn!("uart write: {}", e);
+    fn clamp(n: u64) -> u32 {
+        u32::try_from(n).unwrap_or(u32::MAX)
+    }
+
+    /// The controller's clock, µs since boot (SysTick at 25 MHz).
+    fn now_us() -> u64 {
+        cost::now_ticks() / u64::from(cost::CORE_CLOCK_HZ / 1_000_000)
+    }
+
+    /// The controller, in a static (about 100 KiB: it must not pass through the stack).
+    fn controller() -> &'static mut Controller<CONTROLLER_VOXELS> {
+        static TAKEN: AtomicBool = AtomicBool::new(false);
+        static mut CONTROLLER: Controller<CONTROLLER_VOXELS> = Controller::new();
+        if TAKEN.swap(true, Ordering::AcqRel) {
+            panic!("controller taken twice");
         }
+        // SAFETY: the flag above hands out this one reference once, for the program's
+        // lifetime; nothing else names CONTROLLER.
+        #[allow(unsafe_code)]
+        unsafe {
+            &mut *core::ptr::addr_of_mut!(CONTROLLER)
+        }
+    }
+
+    /// Reports and leaves the emulator with success.
+    fn quit(uart: &mut Uart0, boot: cost::Stamp, cal: &Calibration, c: &CostW) -> ! {
+        let _ = uart.flush();
+        defmt::info!(
+            "QUIT: uptime {=u64} ticks; registration {=u64} instructions in {=u32} steps (worst step {=u32}); worst loop turn {=u32}, worst frame {=u32} instructions; peak stack {=u32} of {=usize} B; spin calibration {=u64} ticks",
+            boot.elapsed_ticks(),
+            c.registration_instructions,
+            c.registration_calls,
+            c.worst_step_instructions,
+            c.worst_call_instructions,
+            c.worst_receive_instructions,
+            c.peak_stack_bytes,
+            cost::stack_size_bytes(),
+            cal.spin_ticks
+        );
         debug::exit(debug::EXIT_SUCCESS);
         loop {
             cortex_m::asm::wfi();
@@ -219,25 +247,13 @@ mod app {
 mod tests {
     use super::*;
 
+    /// `QUIT` can never be a protocol frame: its first byte, a COBS code of 0x51, would
+    /// need 80 bytes after it.
     #[test]
-    fn quit_is_found_across_reads() {
-        let mut w = [0u8; 4];
-        let seen: Vec<bool> = b"xQUQUIT"
-            .iter()
-            .map(|&b| push_and_check_quit(&mut w, b))
-            .collect();
-        assert_eq!(seen, [false, false, false, false, false, false, true]);
-        assert!(!push_and_check_quit(&mut w, b'Q'));
-    }
-
-    #[test]
-    fn decimal_digits() {
-        assert_eq!(decimal(0, &mut [0; 20]), b"0");
-        assert_eq!(decimal(40, &mut [0; 20]), b"40");
-        assert_eq!(
-            decimal(u64::MAX, &mut [0; 20]),
-            u64::MAX.to_string().as_bytes()
-        );
+    fn quit_is_never_a_protocol_frame() {
+        let mut f = QUIT;
+        assert!(ribreg_core::wire::decode::<ribreg_core::wire::ToController>(&mut f).is_err());
+        assert_eq!(QUIT[0] as usize - 1, 80);
         assert_eq!(2 * CALIBRATION_ITERATIONS, 20_000);
     }
 }

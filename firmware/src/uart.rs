@@ -126,7 +126,7 @@ impl<const BASE: usize, const RX_IRQ: u16> Uart<BASE, RX_IRQ> {
         NVIC::unpend(Irq(RX_IRQ));
         // SAFETY: no handler ever runs for this line: its source (CTRL bit 3) is enabled
         // only with PRIMASK set and is acknowledged and unpended before PRIMASK is
-        // cleared (`wait_rx`). Unmasking breaks no mask-based critical section.
+        // cleared (`wait_readable`). Unmasking breaks no mask-based critical section.
         unsafe { NVIC::unmask(Irq(RX_IRQ)) };
         uart
     }
@@ -172,9 +172,9 @@ impl<const BASE: usize, const RX_IRQ: u16> Uart<BASE, RX_IRQ> {
         true
     }
 
-    /// Sleeps until a byte has arrived. Called with interrupts masked it still returns,
-    /// but other pending interrupts then turn the sleep into polling.
-    fn wait_rx(&mut self) {
+    /// Sleeps until a byte has arrived (without taking it). Called with interrupts masked
+    /// it still returns, but other pending interrupts then turn the sleep into polling.
+    pub fn wait_readable(&mut self) {
         let unmasked = cortex_m::register::primask::read().is_active();
         while !self.rx_full() {
             cortex_m::interrupt::disable();
@@ -206,7 +206,7 @@ impl<const BASE: usize, const RX_IRQ: u16> embedded_io::Read for Uart<BASE, RX_I
         if buf.is_empty() {
             return Ok(0);
         }
-        self.wait_rx();
+        self.wait_readable();
         let mut n = 0;
         while n < buf.len() {
             match self.try_read()? {

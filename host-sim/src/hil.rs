@@ -26,8 +26,7 @@ use std::collections::VecDeque;
 use std::io::{Read, Write};
 use std::time::{Duration, Instant};
 
-use ribreg_core::compound::VOXEL_CAPACITY;
-use ribreg_core::controller::Controller;
+use ribreg_core::controller::{Controller, CONTROLLER_VOXELS, CONTROLLER_VOXEL_MM};
 use ribreg_core::geom::Rigid;
 use ribreg_core::rng::Rng;
 use ribreg_core::track::TrackedPose;
@@ -67,12 +66,14 @@ pub trait Port {
     /// Lets `us` of controller time pass (in-process: polls the controller; a real or
     /// emulated controller runs on its own clock, so this sleeps).
     fn advance(&mut self, us: u64);
+    /// Whether the controller's time passes only through [`Port::advance`].
+    fn simulated_clock(&self) -> bool;
 }
 
 /// The controller in this process, clocked by the caller.
 pub struct InProcess {
     /// The controller (boxed: about 100 KiB).
-    pub controller: Box<Controller<VOXEL_CAPACITY>>,
+    pub controller: Box<Controller<CONTROLLER_VOXELS>>,
     rx: wire::Receiver,
     now_us: u64,
     out: Vec<u8>,
@@ -119,6 +120,10 @@ impl Port for InProcess {
     fn read_into(&mut self, out: &mut Vec<u8>, _wait: Duration) -> Result<(), CliError> {
         out.append(&mut self.out);
         Ok(())
+    }
+
+    fn simulated_clock(&self) -> bool {
+        true
     }
 
     fn advance(&mut self, us: u64) {
@@ -186,6 +191,10 @@ impl Port for Stream<std::net::TcpStream> {
 
     fn advance(&mut self, us: u64) {
         std::thread::sleep(Duration::from_micros(us));
+    }
+
+    fn simulated_clock(&self) -> bool {
+        false
     }
 }
 
@@ -537,11 +546,29 @@ fn rigid12(r: &Rigid) -> [f32; 12] {
 }
 
 /// Extra robot behaviour for tests of the controller's watchdog.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct RunOptions {
     /// While executing, the robot stops reporting poses from this many ms after Execute
     /// for the second number of ms.
     pub pose_gap_ms: Option<(u64, u64)>,
+    /// The simulated sweep ([`SweepConfig::default`] unless set).
+    pub sweep: SweepConfig,
+}
+
+impl RunOptions {
+    /// A lighter sweep for quick runs on the emulator's slow link: lines 15 mm apart at
+    /// 30 mm/s, every 8th column annotated (about a third of the bytes).
+    pub fn quick() -> Self {
+        RunOptions {
+            sweep: SweepConfig {
+                line_spacing_mm: 15.0,
+                speed_mm_s: 30.0,
+                column_step_px: 8,
+                ..SweepConfig::default()
+            },
+            ..RunOptions::default()
+        }
+    }
 }
 
 /// Runs the whole procedure on phantom `phantom` through `session`.
@@ -561,8 +588,7 @@ pub fn run_with<P: Port>(
     progress: &mut dyn FnMut(&str),
 ) -> Result<HilReport, CliError> {
     let t0 = Instant::now();
-    let cfg = SweepConfig::default();
-    let logs = sweep::simulate(phantom, &cfg)?;
+    let logs = sweep::simulate(phantom, &options.sweep)?;
     let pair = &logs.pair;
     let (tr, vi) = sweep::calibration_samples(&logs.calib_tracker, &logs.calib_video);
     let lag = ribreg_core::temporal::calibrate(&tr, &vi)?;
@@ -593,7 +619,7 @@ pub fn run_with<P: Port>(
         tcp_t_us: rigid12(&cal.tcp_t_us),
         ee_t_tcp: rigid12(&cal.ee_t_tcp),
         lag_us: (lag.lag_s * 1e6).round() as i32,
-        voxel_mm: ribreg_core::compound::DEFAULT_VOXEL_MM,
+        voxel_mm: CONTROLLER_VOXEL_MM,
         max_speed_mm_s: MAX_SPEED_MM_S,
         max_accel_mm_s2: MAX_ACCEL_MM_S2,
         standoff_mm: STANDOFF_MM,
@@ -727,7 +753,6 @@ pub fn run_with<P: Port>(
     let ee_t_tcp = cal.ee_t_tcp;
     let tcp_t_ee = ee_t_tcp.inverse();
     let mut tcp = flange.after(&ee_t_tcp);
-    let mut setpoint = tcp;
     let mut current: Option<u8> = None;
     let mut reached: Vec<Option<Rigid>> = vec![None; wps.len()];
     let exec_start = Instant::now();
@@ -737,44 +762,22 @@ pub fn run_with<P: Port>(
     let mut exec_ms = 0u64;
     let (mut pose_timeouts, mut setpoints_in_gap) = (0u32, 0u32);
     while !done {
-        let in_gap = options
-            .pose_gap_ms
-            .is_some_and(|(from, len)| exec_ms >= from && exec_ms < from + len);
-        exec_ms += 10;
         if exec_start.elapsed() > timeout {
             return Err(CliError::Usage("execution did not finish in time".into()));
         }
-        // The robot moves toward the latest setpoint, then reports.
-        let q0 = TrackedPose::from_rigid(0.0, &tcp);
-        let q1 = TrackedPose::from_rigid(1.0, &setpoint);
-        tcp = q0.interpolate(&q1, alpha);
-        flange = tcp.after(&tcp_t_ee);
-        if !in_gap {
-            send_pose(session, robot_t_us, &flange)?;
-        }
-        robot_t_us += 10_000;
-        session.port.advance(10_000);
+        let tick = if session.port.simulated_clock() {
+            10_000
+        } else {
+            2_000
+        };
+        session.port.advance(tick);
         session.pump(Duration::from_millis(2))?;
-        let mut got_setpoint = false;
+        // The robot answers every setpoint: it moves 10 ms toward it, then reports (so its
+        // pose stream follows the controller's clock, emulated or not).
+        let mut setpoints = Vec::new();
         while let Some(m) = session.next_message() {
             match m {
-                FromController::Setpoint(sp) => {
-                    got_setpoint = true;
-                    // The controller may emit up to the watchdog's 50 ms into a gap.
-                    if options
-                        .pose_gap_ms
-                        .is_some_and(|(from, len)| exec_ms > from + 70 && exec_ms <= from + len)
-                    {
-                        setpoints_in_gap += 1;
-                    }
-                    setpoint = TrackedPose::new(0.0, Vec3::from(sp.position), sp.quat)?.to_rigid();
-                    if current.is_some_and(|c| c != sp.waypoint) {
-                        if let Some(c) = current {
-                            reached[usize::from(c)] = Some(tcp);
-                        }
-                    }
-                    current = Some(sp.waypoint);
-                }
+                FromController::Setpoint(sp) => setpoints.push(sp),
                 FromController::Status(s) if s.state == State::Done => done = true,
                 FromController::Fault(wire::Fault::PoseTimeout) => {
                     pose_timeouts += 1;
@@ -784,12 +787,45 @@ pub fn run_with<P: Port>(
                 _ => {}
             }
         }
-        quiet_ticks = if got_setpoint || in_gap {
+        if session.port.simulated_clock() && setpoints.is_empty() {
+            // In-process the robot's clock is the controller's: it keeps reporting.
+            exec_ms += 10;
+        }
+        for sp in &setpoints {
+            exec_ms += 10;
+            if options
+                .pose_gap_ms
+                .is_some_and(|(from, len)| exec_ms > from + 70 && exec_ms <= from + len)
+            {
+                setpoints_in_gap += 1;
+            }
+            let target = TrackedPose::new(0.0, Vec3::from(sp.position), sp.quat)?.to_rigid();
+            if current.is_some_and(|c| c != sp.waypoint) {
+                if let Some(c) = current {
+                    reached[usize::from(c)] = Some(tcp);
+                }
+            }
+            current = Some(sp.waypoint);
+            let q0 = TrackedPose::from_rigid(0.0, &tcp);
+            let q1 = TrackedPose::from_rigid(1.0, &target);
+            tcp = q0.interpolate(&q1, alpha);
+        }
+        let in_gap = options
+            .pose_gap_ms
+            .is_some_and(|(from, len)| exec_ms >= from && exec_ms < from + len);
+        if !setpoints.is_empty() || (session.port.simulated_clock() && !in_gap) {
+            if !in_gap {
+                flange = tcp.after(&tcp_t_ee);
+                send_pose(session, robot_t_us, &flange)?;
+            }
+            robot_t_us += 10_000;
+        }
+        quiet_ticks = if !setpoints.is_empty() || in_gap {
             0
         } else {
             quiet_ticks + 1
         };
-        if quiet_ticks > 20 {
+        if quiet_ticks > 50 {
             session.send(&ToController::Command(Command::Status))?;
             quiet_ticks = 0;
         }

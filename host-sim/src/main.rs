@@ -57,7 +57,8 @@ enum Command {
     /// Play the robot PC in a whole procedure against the controller (upload, sweep,
     /// register, execute) and report where the probe ended up at each waypoint.
     Hil {
-        /// Run the controller in this process instead of the emulator.
+        /// Run the controller in this process instead of the emulator (the default builds
+        /// the firmware and runs it under qemu-system-arm, then compares with in-process).
         #[arg(long, conflicts_with = "port")]
         in_process: bool,
         /// Connect to a controller at HOST:PORT (a serial port exposed over TCP) instead
@@ -70,6 +71,13 @@ enum Command {
         /// Seed of the fault injection.
         #[arg(long, default_value_t = 1)]
         fault_seed: u64,
+        /// A lighter sweep (lines 15 mm apart, 30 mm/s, every 8th column): a third of the
+        /// bytes on the emulator's slow link.
+        #[arg(long)]
+        quick: bool,
+        /// Write the firmware's defmt log (QEMU's semihosting output) here.
+        #[arg(long)]
+        defmt_log: Option<PathBuf>,
         #[command(flatten)]
         phantom: PhantomArgs,
         /// Also write the report as JSON.
@@ -248,31 +256,30 @@ fn read_lag_ms(path: &std::path::Path) -> Result<f64, CliError> {
         .ok_or_else(|| CliError::Usage(format!("{}: no number \"lag_ms\"", path.display())))
 }
 
+#[allow(clippy::too_many_arguments)]
 fn run_hil(
     in_process: bool,
     port: Option<String>,
     faults: Option<u64>,
+    options: &ribreg_sim::hil::RunOptions,
+    defmt_log: Option<PathBuf>,
     phantom: &PhantomConfig,
     json: Option<PathBuf>,
     progress: &mut dyn FnMut(&str),
 ) -> Result<(), CliError> {
     use ribreg_sim::hil::{self, Faults, Session};
     let faults = faults.map(|seed| (Faults::DEFAULT, seed));
-    let report = if in_process || port.is_none() {
-        if !in_process {
-            return Err(CliError::Usage(
-                "the emulator run needs the firmware: use --in-process or --port HOST:PORT".into(),
-            ));
-        }
+    let report = if in_process {
         let mut session = Session::new(hil::InProcess::new(), faults);
-        hil::run(&mut session, phantom, progress)?
-    } else {
-        let addr = port.unwrap_or_default();
+        hil::run_with(&mut session, phantom, options.clone(), progress)?
+    } else if let Some(addr) = port {
         let stream = std::net::TcpStream::connect(&addr)
             .map_err(|e| CliError::Usage(format!("{addr}: cannot connect: {e}")))?;
         let _ = stream.set_nodelay(true);
         let mut session = Session::new(hil::Stream::new(stream), faults);
-        hil::run(&mut session, phantom, progress)?
+        hil::run_with(&mut session, phantom, options.clone(), progress)?
+    } else {
+        run_emulated(faults, options, defmt_log, phantom, progress)?
     };
     print_hil(&report);
     if let Some(path) = json {
@@ -298,6 +305,74 @@ fn run_hil(
     Ok(())
 }
 
+/// The procedure against the firmware under QEMU (`-icount shift=0,sleep=on`: SysTick
+/// counts instructions while the firmware works), then the same in-process for comparison.
+fn run_emulated(
+    faults: Option<(ribreg_sim::hil::Faults, u64)>,
+    options: &ribreg_sim::hil::RunOptions,
+    defmt_log: Option<PathBuf>,
+    phantom: &PhantomConfig,
+    progress: &mut dyn FnMut(&str),
+) -> Result<ribreg_sim::hil::HilReport, CliError> {
+    use ribreg_sim::hil::{self, Port, Session};
+    use ribreg_sim::qemu;
+    let q = |e: qemu::QemuError| CliError::Usage(e.to_string());
+    progress("building the firmware");
+    let elf = qemu::firmware_elf().map_err(q)?;
+    let opts = qemu::Options {
+        icount: Some(qemu::Icount {
+            shift: 0,
+            sleep: true,
+        }),
+        semihosting_log: defmt_log,
+        ..qemu::Options::default()
+    };
+    let mut emu = qemu::Emulator::start(&elf, &opts).map_err(q)?;
+    progress(&format!("emulator up ({})", emu.args().join(" ")));
+    let stream = emu
+        .serial()
+        .try_clone()
+        .map_err(|e| CliError::Usage(format!("emulator serial port: {e}")))?;
+    let mut session = Session::new(hil::Stream::new(stream), faults);
+    let report = match hil::run_with(&mut session, phantom, options.clone(), progress) {
+        Ok(r) => r,
+        Err(e) => {
+            let status = emu.wait(std::time::Duration::from_secs(2));
+            return Err(CliError::Usage(format!(
+                "{e}; the emulator: {status:?}, {}",
+                emu.stderr_output().trim()
+            )));
+        }
+    };
+    session.port.write_all(b"QUIT\0")?;
+    let status = emu.wait(std::time::Duration::from_secs(30)).map_err(q)?;
+    if !status.success() {
+        return Err(CliError::Usage(format!(
+            "the firmware did not exit cleanly ({status}); QEMU said: {}",
+            emu.stderr_output().trim()
+        )));
+    }
+    progress("the same procedure in-process, for comparison");
+    let mut local = Session::new(hil::InProcess::new(), None);
+    let reference = hil::run_with(&mut local, phantom, options.clone(), &mut |_| {})?;
+    let diff = report
+        .waypoints
+        .iter()
+        .zip(&reference.waypoints)
+        .flat_map(|(a, b)| (0..3).map(move |i| (a.mapped[i] - b.mapped[i]).abs()))
+        .fold(0.0f32, f32::max);
+    println!(
+        "emulated vs in-process: mapped waypoints differ by at most {diff:.2e} mm; points {} vs {}",
+        report.points, reference.points
+    );
+    if diff > 1e-2 || report.points != reference.points {
+        return Err(CliError::Usage(format!(
+            "the emulated controller disagrees with the in-process one by {diff} mm"
+        )));
+    }
+    Ok(report)
+}
+
 fn print_hil(r: &ribreg_sim::hil::HilReport) {
     println!("waypoint  mapped (x, y, z) mm               quality  probe error");
     for (i, w) in r.waypoints.iter().enumerate() {
@@ -308,6 +383,19 @@ fn print_hil(r: &ribreg_sim::hil::HilReport) {
     }
     let mean =
         r.waypoints.iter().map(|w| w.error_mm).sum::<f64>() / r.waypoints.len().max(1) as f64;
+    let c = &r.cost;
+    if c.registration_calls > 0 {
+        println!(
+            "controller cost (instructions, QEMU -icount): registration {} in {} steps (worst step {}), \
+             worst control-loop turn {}, worst frame handling {}; peak stack {} B",
+            c.registration_instructions,
+            c.registration_calls,
+            c.worst_step_instructions,
+            c.worst_call_instructions,
+            c.worst_receive_instructions,
+            c.peak_stack_bytes
+        );
+    }
     println!(
         "hil: {} waypoints, probe error mean {mean:.2} mm, max {:.2} mm (tolerance {} mm); lag {:.1} ms; \
          {} points compounded; applied poses {}/{}, frames {}/{}; link: {} frames sent, {} re-sent, \
@@ -436,9 +524,19 @@ fn main() -> ExitCode {
             port,
             faults,
             fault_seed,
+            quick,
+            defmt_log,
             phantom,
             json,
-        } => run_hil(in_process, port, faults.then_some(fault_seed), &phantom.config(), json, &mut progress),
+        } => {
+            let options = if quick {
+                ribreg_sim::hil::RunOptions::quick()
+            } else {
+                ribreg_sim::hil::RunOptions::default()
+            };
+            let faults = faults.then_some(fault_seed);
+            run_hil(in_process, port, faults, &options, defmt_log, &phantom.config(), json, &mut progress)
+        }
         Command::Calibrate {
             kind:
                 CalibrateCommand::Temporal {

@@ -6,6 +6,11 @@ use ribreg_sim::hil::{self, Faults, HilReport, InProcess, RunOptions, Session};
 use ribreg_sim::phantom::PhantomConfig;
 
 fn run(faults: Option<Faults>, options: RunOptions) -> HilReport {
+    // The quick sweep keeps these runs short; the full one is `ribreg hil`.
+    let options = RunOptions {
+        sweep: RunOptions::quick().sweep,
+        ..options
+    };
     let mut session = Session::new(InProcess::new(), faults.map(|f| (f, 5)));
     hil::run_with(
         &mut session,
@@ -96,6 +101,7 @@ fn setpoints_stop_when_robot_poses_stop() {
         None,
         RunOptions {
             pose_gap_ms: Some((1_000, 300)),
+            ..RunOptions::default()
         },
     );
     assert_eq!(r.pose_timeouts, 1);

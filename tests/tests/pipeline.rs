@@ -271,19 +271,16 @@ fn incremental_registration_equals_register() {
         let whole = register(&template, &us, &cfg).unwrap();
         let mut r = Registering::start(&us, &cfg).unwrap();
         let mut calls = 0;
-        let stepped = loop {
+        loop {
             calls += 1;
-            if let Some(reg) = r.step(&template, &us, &cfg, 7).unwrap() {
-                break reg;
+            if r.step(&template, &us, &cfg, 7).unwrap() {
+                break;
             }
-        };
-        assert_eq!(stepped, whole);
+        }
+        assert_eq!(r.registration(), Some(&whole));
         let total = cfg.som1.iterations + cfg.som2.iterations;
         assert_eq!(r.progress(&cfg), (total, total));
         assert!(calls as u32 >= total / 7, "{calls}");
-        assert!(
-            r.step(&template, &us, &cfg, 7).is_err(),
-            "no step after the end"
-        );
+        assert!(r.step(&template, &us, &cfg, 7).unwrap(), "done stays done");
     }
 }

@@ -1,0 +1,144 @@
+//! The firmware under QEMU speaks the protocol: handshake, status, a corrupt frame
+//! NACKed, measured costs, and the `QUIT` exit. (The whole emulated procedure is
+//! `ribreg hil`, run by `.ci/run`.)
+//!
+//! Builds `ribreg-firmware` for `thumbv7em-none-eabihf` (or takes `RIBREG_FIRMWARE_ELF`)
+//! and needs `qemu-system-arm`. Without QEMU the test is skipped with a message, unless
+//! `RIBREG_REQUIRE_QEMU` is set (CI sets it to 1), which makes a missing QEMU a failure.
+
+use ribreg_core::wire::{
+    self, Command, FromController, NackCode, State, ToController, MAGIC, MAX_FRAME, VERSION,
+};
+use ribreg_sim::qemu::{self, Emulator, Icount, Options, QemuError};
+use std::io::{Read, Write};
+use std::net::TcpStream;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+fn qemu_required() -> bool {
+    std::env::var("RIBREG_REQUIRE_QEMU").is_ok_and(|v| !v.is_empty() && v != "0")
+}
+
+/// The firmware ELF; `None` (test skipped) only if QEMU is missing and not required.
+fn firmware() -> Option<PathBuf> {
+    let program = PathBuf::from(qemu::QEMU);
+    if !qemu::qemu_available(&program) {
+        let err = QemuError::NotInstalled { program };
+        if qemu_required() {
+            panic!("RIBREG_REQUIRE_QEMU is set: {err}");
+        }
+        eprintln!("SKIPPED (set RIBREG_REQUIRE_QEMU=1 to make this a failure): {err}");
+        return None;
+    }
+    Some(qemu::firmware_elf().unwrap_or_else(|e| panic!("{e}")))
+}
+
+fn send(serial: &mut TcpStream, seq: u16, msg: &ToController) {
+    let mut buf = [0u8; MAX_FRAME];
+    let n = wire::encode(seq, msg, &mut buf).unwrap();
+    serial.write_all(&buf[..n]).unwrap();
+}
+
+/// The next controller message (20 s at most).
+fn next(serial: &mut TcpStream, rx: &mut wire::Receiver) -> FromController {
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let mut byte = [0u8; 1];
+    while Instant::now() < deadline {
+        if serial.read(&mut byte).unwrap() == 1 {
+            if let Some(Ok(frame)) = rx.push(byte[0]) {
+                return wire::decode::<FromController>(frame).unwrap().1;
+            }
+        }
+    }
+    panic!("no reply from the firmware");
+}
+
+#[test]
+fn firmware_speaks_the_protocol() {
+    let Some(elf) = firmware() else { return };
+    let log = Path::new(env!("CARGO_TARGET_TMPDIR")).join("qemu_controller.defmt");
+    let opts = Options {
+        icount: Some(Icount {
+            shift: 0,
+            sleep: true,
+        }),
+        semihosting_log: Some(log.clone()),
+        ..Options::default()
+    };
+    let mut emu = Emulator::start(&elf, &opts).unwrap_or_else(|e| panic!("{e}"));
+    eprintln!(
+        "defmt log: {} (defmt-print -e {} < it)",
+        log.display(),
+        elf.display()
+    );
+    let mut serial = emu.serial().try_clone().unwrap();
+    let mut rx = wire::Receiver::new();
+
+    // Before the handshake: refused.
+    send(&mut serial, 0, &ToController::Command(Command::Status));
+    assert!(matches!(
+        next(&mut serial, &mut rx),
+        FromController::Nack {
+            code: NackCode::Version,
+            ..
+        }
+    ));
+    send(
+        &mut serial,
+        0,
+        &ToController::Hello {
+            magic: MAGIC,
+            version: VERSION,
+        },
+    );
+    assert!(matches!(
+        next(&mut serial, &mut rx),
+        FromController::HelloAck {
+            magic: MAGIC,
+            version: VERSION,
+            max_frame,
+        } if usize::from(max_frame) == MAX_FRAME
+    ));
+    // Garbage, then a frame with a flipped byte: NACKed, the link resynchronises.
+    serial.write_all(&[0x13, 0x37, 0x00]).unwrap();
+    let mut buf = [0u8; MAX_FRAME];
+    let n = wire::encode(1, &ToController::Command(Command::Status), &mut buf).unwrap();
+    buf[2] ^= 0x04;
+    serial.write_all(&buf[..n]).unwrap();
+    for _ in 0..2 {
+        assert_eq!(
+            next(&mut serial, &mut rx),
+            FromController::Nack {
+                seq: 1,
+                code: NackCode::Corrupt
+            }
+        );
+    }
+    send(&mut serial, 1, &ToController::Command(Command::Status));
+    match next(&mut serial, &mut rx) {
+        FromController::Status(s) => {
+            assert_eq!(s.state, State::Idle);
+            assert_eq!(s.expected_seq, 2);
+        }
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(next(&mut serial, &mut rx), FromController::Ack { seq: 1 });
+    send(&mut serial, 2, &ToController::Command(Command::Cost));
+    match next(&mut serial, &mut rx) {
+        FromController::Cost(c) => {
+            eprintln!("firmware cost so far: {c:?}");
+            assert!(c.peak_stack_bytes > 0 && c.worst_receive_instructions > 0);
+        }
+        other => panic!("{other:?}"),
+    }
+    serial.write_all(b"QUIT\0").unwrap();
+    let status = emu
+        .wait(Duration::from_secs(20))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        status.success(),
+        "firmware exit {status}; QEMU stderr: {}",
+        emu.stderr_output()
+    );
+    assert!(!emu.semihosting_output().is_empty(), "no defmt frames");
+}
