@@ -29,9 +29,10 @@ const AXIS_OFFSET: i64 = 1 << (AXIS_BITS - 1);
 pub const MIN_VOXEL_MM: f32 = 0.1;
 /// Coarsenings allowed by default: the voxel edge may grow 8× (e.g. 1.5 → 12 mm).
 pub const DEFAULT_MAX_COARSENINGS: u8 = 3;
-/// Voxel capacity of the controller: 2048 × 24 B (code 8 + sum 12 + count 4) = 48 KiB.
-/// A whole-chest phantom sweep needs 5,500–7,900 voxels of 2 mm, so this cloud coarsens
-/// once, to 4 mm (about 2,000 voxels; README).
+/// A mid-sized voxel capacity (benchmarks, size report): 2048 × 24 B (code 8 + sum 12 +
+/// count 4) = 48 KiB. A whole-chest phantom sweep needs 5,500–7,900 voxels of 2 mm, so
+/// this cloud coarsens once, to 4 mm (about 2,000 voxels). The controller holds fewer,
+/// [`crate::controller::CONTROLLER_VOXELS`] (RAM budget; README).
 pub const VOXEL_CAPACITY: usize = 2048;
 /// Default finest voxel edge, mm: below the registration's SOM-1 spacing (~4 mm between
 /// 400 nodes on a cage), above the pixel size and the annotation noise.
