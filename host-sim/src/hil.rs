@@ -198,6 +198,53 @@ impl Port for Stream<std::net::TcpStream> {
     }
 }
 
+impl Port for Stream<Box<dyn serialport::SerialPort>> {
+    fn write_all(&mut self, bytes: &[u8]) -> Result<(), CliError> {
+        self.stream
+            .write_all(bytes)
+            .map_err(|e| CliError::Usage(format!("serial port: cannot write: {e}")))
+    }
+
+    fn read_into(&mut self, out: &mut Vec<u8>, wait: Duration) -> Result<(), CliError> {
+        let _ = self.stream.set_timeout(wait.max(Duration::from_millis(1)));
+        let mut buf = [0u8; 4096];
+        loop {
+            match self.stream.read(&mut buf) {
+                Ok(0) => return Ok(()),
+                Ok(n) => {
+                    out.extend_from_slice(&buf[..n]);
+                    // Take whatever else is waiting, without waiting again.
+                    if self.stream.bytes_to_read().unwrap_or(0) == 0 {
+                        return Ok(());
+                    }
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => return Ok(()),
+                Err(e) => return Err(CliError::Usage(format!("serial port: cannot read: {e}"))),
+            }
+        }
+    }
+
+    fn advance(&mut self, us: u64) {
+        std::thread::sleep(Duration::from_micros(us));
+    }
+
+    fn simulated_clock(&self) -> bool {
+        false
+    }
+}
+
+/// Opens a controller board's serial device (8N1) at `baud`.
+pub fn open_serial(
+    path: &str,
+    baud: u32,
+) -> Result<Stream<Box<dyn serialport::SerialPort>>, CliError> {
+    serialport::new(path, baud)
+        .timeout(Duration::from_millis(10))
+        .open()
+        .map(Stream::new)
+        .map_err(|e| CliError::Usage(format!("{path}: cannot open the serial port: {e}")))
+}
+
 /// Probabilities of each link fault per host frame.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Faults {

@@ -61,10 +61,14 @@ enum Command {
         /// the firmware and runs it under qemu-system-arm, then compares with in-process).
         #[arg(long, conflicts_with = "port")]
         in_process: bool,
-        /// Connect to a controller at HOST:PORT (a serial port exposed over TCP) instead
-        /// of starting the emulator.
+        /// A controller board on a serial device (`/dev/ttyUSB0`, `COM3`), or at HOST:PORT
+        /// (a serial port exposed over TCP, such as the emulator's), instead of starting
+        /// the emulator.
         #[arg(long)]
         port: Option<String>,
+        /// Baud rate of a serial device.
+        #[arg(long, default_value_t = 115_200)]
+        baud: u32,
         /// Inject link faults (corrupted, dropped, duplicated, reordered frames, garbage).
         #[arg(long)]
         faults: bool,
@@ -259,7 +263,7 @@ fn read_lag_ms(path: &std::path::Path) -> Result<f64, CliError> {
 #[allow(clippy::too_many_arguments)]
 fn run_hil(
     in_process: bool,
-    port: Option<String>,
+    port: Option<(String, u32)>,
     faults: Option<u64>,
     options: &ribreg_sim::hil::RunOptions,
     defmt_log: Option<PathBuf>,
@@ -272,7 +276,13 @@ fn run_hil(
     let report = if in_process {
         let mut session = Session::new(hil::InProcess::new(), faults);
         hil::run_with(&mut session, phantom, options.clone(), progress)?
-    } else if let Some(addr) = port {
+    } else if let Some((path, baud)) = port
+        .as_ref()
+        .filter(|(p, _)| !p.contains(':') || p.starts_with("COM"))
+    {
+        let mut session = Session::new(hil::open_serial(path, *baud)?, faults);
+        hil::run_with(&mut session, phantom, options.clone(), progress)?
+    } else if let Some((addr, _)) = port {
         let stream = std::net::TcpStream::connect(&addr)
             .map_err(|e| CliError::Usage(format!("{addr}: cannot connect: {e}")))?;
         let _ = stream.set_nodelay(true);
@@ -526,6 +536,7 @@ fn main() -> ExitCode {
             fault_seed,
             quick,
             defmt_log,
+            baud,
             phantom,
             json,
         } => {
@@ -535,6 +546,7 @@ fn main() -> ExitCode {
                 ribreg_sim::hil::RunOptions::default()
             };
             let faults = faults.then_some(fault_seed);
+            let port = port.map(|p| (p, baud));
             run_hil(in_process, port, faults, &options, defmt_log, &phantom.config(), json, &mut progress)
         }
         Command::Calibrate {

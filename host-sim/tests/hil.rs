@@ -109,3 +109,17 @@ fn setpoints_stop_when_robot_poses_stop() {
     // After the gap the procedure completes within tolerance.
     assert!(r.max_error() <= hil::TOLERANCE_MM);
 }
+
+#[test]
+fn a_missing_serial_device_is_one_clear_error() {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_ribreg"))
+        .args(["hil", "--port", "/dev/ribreg-no-such-tty"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("/dev/ribreg-no-such-tty: cannot open the serial port"),
+        "{err}"
+    );
+}
