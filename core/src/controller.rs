@@ -35,7 +35,7 @@ use crate::compound::{Compounder, DEFAULT_MAX_COARSENINGS};
 use crate::error::{Error, Result};
 use crate::geom::Rigid;
 use crate::pipeline::{Config, Registering, Registration, Template, MIN_CLOUD_POINTS};
-use crate::probe::{Calibration, ProbeModel};
+use crate::probe::Calibration;
 use crate::skeleton::{SKELETON_POINTS, SOM1_CAPACITY};
 use crate::track::{TrackedPose, TRACK_CAPACITY};
 use crate::wire::{
@@ -749,12 +749,7 @@ fn rigid(w: &[f32; 12]) -> Rigid {
 
 fn settings(c: &Configure) -> Result<Settings> {
     let calibration = Calibration {
-        probe: ProbeModel {
-            width_px: c.probe.width_px,
-            height_px: c.probe.height_px,
-            footprint_mm: c.probe.footprint_mm,
-            depth_mm: c.probe.depth_mm,
-        },
+        probe: c.probe,
         tcp_t_us: rigid(&c.tcp_t_us),
         ee_t_tcp: rigid(&c.ee_t_tcp),
     };

@@ -27,8 +27,10 @@ pub const MAX_PROBE_MM: f32 = 1000.0;
 /// entry) and of its determinant from +1.
 pub const ROTATION_TOLERANCE: f32 = 1e-3;
 
-/// The image geometry of a linear probe.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// The image geometry of a linear probe (also its wire and JSON form: the field names are
+/// the keys of `probe.json`'s `probe` object).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ProbeModel {
     /// Image width, pixels (columns, along the footprint).

@@ -67,18 +67,8 @@ pub type P3 = [f32; 3];
 /// A rigid transform on the wire: rotation row-major (9) then translation (3).
 pub type RigidW = [f32; 12];
 
-/// Probe image geometry (see [`crate::probe::ProbeModel`]).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct ProbeW {
-    /// Image width, pixels.
-    pub width_px: u16,
-    /// Image height, pixels.
-    pub height_px: u16,
-    /// Footprint, mm.
-    pub footprint_mm: f32,
-    /// Imaging depth, mm.
-    pub depth_mm: f32,
-}
+/// Probe image geometry: the core's [`crate::probe::ProbeModel`] itself.
+pub use crate::probe::ProbeModel as ProbeW;
 const PROBE_W: usize = 2 * U16 + 2 * F32;
 
 /// Sweep and motion configuration.

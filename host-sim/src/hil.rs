@@ -31,7 +31,7 @@ use ribreg_core::geom::Rigid;
 use ribreg_core::rng::Rng;
 use ribreg_core::track::TrackedPose;
 use ribreg_core::wire::{
-    self, Command, Configure, CostW, FrameW, FromController, NackCode, Node, PoseW, ProbeW, State,
+    self, Command, Configure, CostW, FrameW, FromController, NackCode, Node, PoseW, State,
     TemplateShape, ToController, WaypointW, MAGIC, MAX_FRAME, NODES_PER_CHUNK, PIXEL_SUBDIVISIONS,
     VERSION, WAYPOINTS_PER_CHUNK,
 };
@@ -657,12 +657,7 @@ pub fn run_with<P: Port>(
     })?;
     session.flush(timeout)?;
     session.send(&ToController::Configure(Configure {
-        probe: ProbeW {
-            width_px: cal.probe.width_px,
-            height_px: cal.probe.height_px,
-            footprint_mm: cal.probe.footprint_mm,
-            depth_mm: cal.probe.depth_mm,
-        },
+        probe: cal.probe,
         tcp_t_us: rigid12(&cal.tcp_t_us),
         ee_t_tcp: rigid12(&cal.ee_t_tcp),
         lag_us: (lag.lag_s * 1e6).round() as i32,

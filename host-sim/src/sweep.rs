@@ -163,27 +163,13 @@ pub fn default_calibration() -> Calibration {
 #[serde(deny_unknown_fields)]
 pub struct ProbeFile {
     /// Image geometry.
-    pub probe: ProbeJson,
+    pub probe: ProbeModel,
     /// Image frame in the TCP frame.
     #[serde(rename = "tcp_T_us")]
     pub tcp_t_us: Pose,
     /// TCP frame in the flange frame (the holder).
     #[serde(rename = "ee_T_tcp")]
     pub ee_t_tcp: Pose,
-}
-
-/// The `probe` object of `probe.json`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ProbeJson {
-    /// Image width, pixels.
-    pub width_px: u16,
-    /// Image height, pixels.
-    pub height_px: u16,
-    /// Footprint, mm.
-    pub footprint_mm: f32,
-    /// Imaging depth, mm.
-    pub depth_mm: f32,
 }
 
 fn rigid_of(p: &Pose) -> Rigid {
@@ -208,12 +194,7 @@ impl ProbeFile {
     /// The file of a calibration.
     pub fn from_calibration(c: &Calibration) -> ProbeFile {
         ProbeFile {
-            probe: ProbeJson {
-                width_px: c.probe.width_px,
-                height_px: c.probe.height_px,
-                footprint_mm: c.probe.footprint_mm,
-                depth_mm: c.probe.depth_mm,
-            },
+            probe: c.probe,
             tcp_t_us: pose_of(&c.tcp_t_us),
             ee_t_tcp: pose_of(&c.ee_t_tcp),
         }
@@ -222,12 +203,7 @@ impl ProbeFile {
     /// The calibration, validated.
     pub fn calibration(&self) -> Result<Calibration, Error> {
         let c = Calibration {
-            probe: ProbeModel {
-                width_px: self.probe.width_px,
-                height_px: self.probe.height_px,
-                footprint_mm: self.probe.footprint_mm,
-                depth_mm: self.probe.depth_mm,
-            },
+            probe: self.probe,
             tcp_t_us: rigid_of(&self.tcp_t_us),
             ee_t_tcp: rigid_of(&self.ee_t_tcp),
         };
