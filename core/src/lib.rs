@@ -24,6 +24,10 @@
 //! (paper Eq. 1), [`temporal`] lag estimation by normalised cross-correlation, [`track`]
 //! pose window with lerp/slerp interpolation, [`compound`] bounded voxel compounding.
 //!
+//! The controller that runs all this on the Cortex-M4F is [`controller`] (a host-testable
+//! state machine: upload, sweep, registration in bounded steps, setpoints, pose
+//! watchdog), speaking the versioned, COBS/CRC-32 framed protocol of [`wire`].
+//!
 //! ```
 //! use ribreg_core::{pipeline::{register, Config, Template}, local_rigid::TransformCache, Vec3};
 //! # fn cage() -> Vec<Vec3> { ribreg_core::example::cage(0.0).collect() }
