@@ -25,7 +25,7 @@
 //! * **Execution**: setpoints every [`SETPOINT_PERIOD_US`] along straight segments with
 //!   a trapezoidal speed profile (configured speed and acceleration limits), a dwell of
 //!   [`DWELL_US`] at each target; if no robot pose arrived for more than
-//!   [`POSE_TIMEOUT_US`], setpoints stop and [`Fault::PoseTimeout`] is reported once; they
+//!   [`POSE_TIMEOUT_US`], setpoints stop and [`crate::wire::Fault::PoseTimeout`] is reported once; they
 //!   resume, from where they stopped, when poses do.
 //!
 //! Time is the caller's monotonic clock in µs (`now_us`). Nothing allocates or panics on
