@@ -1,7 +1,7 @@
 //! A small f64 k-d tree answering nearest-*index* and k-nearest queries.
 //!
 //! Built once over a borrowed copy of the points (median splits on the axis of largest
-//! spread, leaves of up to [`LEAF_SIZE`] points). Queries are exact. Ties in distance are
+//! spread, leaves of up to `LEAF_SIZE` = 8 points). Queries are exact. Ties in distance are
 //! broken toward the smaller point index, so every query has one deterministic answer
 //! whatever the tree's shape.
 
