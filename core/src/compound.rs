@@ -418,21 +418,22 @@ impl<const POSES: usize, const VOXELS: usize> Compounder<POSES, VOXELS> {
             }
         };
         let b_t_us = b_t_ee.after(&self.ee_t_us);
-        // Note(unwrap): every pixel was checked above.
-        let point = |p: &[f32; 2]| b_t_us.apply(&probe.pixel_to_image(p[0], p[1]).unwrap());
+        let point = |p: &[f32; 2]| {
+            probe
+                .pixel_to_image(p[0], p[1])
+                .map(|q| b_t_us.apply(&q))
+                .filter(|q| q.iter().all(|v| v.is_finite()) && q.amax() <= crate::MAX_COORD_MM)
+        };
         // All or nothing: a point beyond MAX_COORD_MM (a pose at the edge of the range)
         // refuses the frame before anything is inserted.
-        if let Some(i) = pixels.iter().position(|p| {
-            let q = point(p);
-            !q.iter().all(|v| v.is_finite()) || q.amax() > crate::MAX_COORD_MM
-        }) {
+        if let Some(i) = pixels.iter().position(|p| point(p).is_none()) {
             self.frames.invalid = self.frames.invalid.saturating_add(1);
             return Err(Error::Pixel { index: i as u32 });
         }
         let mut kept = 0u32;
-        for p in pixels {
+        for q in pixels.iter().filter_map(point) {
             // Checked above: only a full cloud (counted) or a finished one refuses.
-            if self.cloud.insert(&point(p))? {
+            if self.cloud.insert(&q)? {
                 kept += 1;
             }
         }

@@ -178,13 +178,11 @@ impl Template {
                 "template sternum split fractions must be in [0, 1]",
             ));
         }
-        let mut nodes = heapless::Vec::new();
-        let mut node_labels = NodeLabels::new();
-        for (p, l) in som1.iter().zip(labels) {
-            // Note(unwrap): validate() bounded the count by SOM1_CAPACITY, both capacities.
-            nodes.push(*p).unwrap();
-            node_labels.push(*l).unwrap();
-        }
+        let capacity = Error::Capacity {
+            capacity: crate::skeleton::SOM1_CAPACITY as u32,
+        };
+        let nodes = heapless::Vec::from_slice(som1).map_err(|_| capacity)?;
+        let node_labels = NodeLabels::from_slice(labels).map_err(|_| capacity)?;
         Ok(Template {
             graph: SkeletonGraph {
                 som1: nodes,
