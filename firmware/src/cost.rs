@@ -4,8 +4,10 @@
 //! # Instruction counts
 //!
 //! DWT CYCCNT reads 0 under QEMU 7.2, so the counter is SysTick clocked from the core
-//! (`CLKSOURCE = 1`, 25 MHz on MPS2), free-running with the largest reload (2^24 ticks a
-//! period) and extended to 64 bits by counting wraps in the SysTick exception.
+//! (`CLKSOURCE = 1`, 25 MHz on MPS2), free-running with a 1 ms period (25,000 ticks) and
+//! extended to 64 bits by counting wraps in the SysTick exception. The 1 ms wrap is also
+//! the controller's wake-up: while it executes it sleeps in WFI between bytes, so under
+//! `-icount ...,sleep=on` its clock follows the host's instead of the emulator's speed.
 //!
 //! Under `qemu-system-arm -icount shift=0,align=off,sleep=off` every guest instruction
 //! advances the virtual clock by 2^0 ns, and a 25 MHz tick lasts 40 ns, so one tick is
@@ -18,7 +20,8 @@
 //! Instructions are not cycles: quote the count and the cycles per instruction assumed.
 //!
 //! The 64-bit count stays right as long as interrupts are never masked for longer than
-//! one period (2^24 ticks: 0.67 s at 25 MHz, 671 M instructions under `-icount shift=0`):
+//! one period (1 ms: 1 M instructions under `-icount shift=0`; the firmware's critical
+//! sections are a few dozen instructions):
 //! a wrap that happens while they are masked is seen through the SysTick pending bit, a
 //! second one would be lost.
 //!
@@ -33,8 +36,8 @@
 //! longer painted. A frame that happens to store 0xCCCC_CCCC at its deepest word makes
 //! the figure one word short; nothing else is approximate.
 
-/// SysTick reload value: the counter runs 0xFF_FFFF down to 0, a period of 2^24 ticks.
-pub const RELOAD: u32 = 0x00FF_FFFF;
+/// SysTick reload value: the counter runs 24,999 down to 0, a period of 1 ms at 25 MHz.
+pub const RELOAD: u32 = 24_999;
 
 /// Ticks in one SysTick period.
 pub const PERIOD_TICKS: u64 = RELOAD as u64 + 1;
@@ -52,7 +55,9 @@ pub const STACK_PAINT: u32 = 0xCCCC_CCCC;
 /// Ticks since SysTick was started, from the wrap count and the current value register
 /// (which counts down from [`RELOAD`]).
 pub const fn ticks_from(wraps: u64, current: u32) -> u64 {
-    wraps * PERIOD_TICKS + (RELOAD - (current & RELOAD)) as u64
+    let value = current & 0x00FF_FFFF;
+    let value = if value > RELOAD { RELOAD } else { value };
+    wraps * PERIOD_TICKS + (RELOAD - value) as u64
 }
 
 /// One consistent reading of the free-running counter, taken with interrupts masked:
@@ -123,8 +128,7 @@ mod target {
     pub struct Cost;
 
     impl Cost {
-        /// Starts SysTick from the core clock with the largest reload and its wrap
-        /// interrupt. Taking `SYST` by value keeps anyone else from reprogramming it.
+        /// Starts SysTick from the core clock with [`RELOAD`] and its wrap interrupt. Taking `SYST` by value keeps anyone else from reprogramming it.
         /// Before this, every stamp reads 0.
         pub fn init(mut syst: SYST) {
             syst.disable_counter();
@@ -280,7 +284,7 @@ mod tests {
             assert!(t >= last);
             last = t;
         }
-        // The u32 wrap count (2^32 periods of 0.67 s, about 91 years) plus a pending wrap
+        // The u32 wrap count (2^32 periods of 1 ms, about 49 days) plus a pending wrap
         // does not overflow.
         assert_eq!(reading(u32::MAX, 0, true, RELOAD), (1 << 32) * PERIOD_TICKS);
     }

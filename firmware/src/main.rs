@@ -173,10 +173,16 @@ mod app {
                 cost.peak_stack_bytes = cost::peak_stack_bytes() as u32;
             }
             controller.set_cost(cost);
-            // 4. Nothing to do: sleep until a byte arrives.
-            let busy = matches!(controller.state(), State::Registering | State::Executing);
-            if !busy && !matches!(uart.read_ready(), Ok(true)) {
-                uart.wait_readable();
+            // 4. Nothing to do: sleep until a byte arrives (executing: or the next 1 ms
+            // SysTick, so setpoints and the watchdog keep their time).
+            match controller.state() {
+                State::Registering => {}
+                State::Executing => uart.sleep_until_rx_or_interrupt(),
+                _ => {
+                    if !matches!(uart.read_ready(), Ok(true)) {
+                        uart.wait_readable();
+                    }
+                }
             }
         }
     }

@@ -120,7 +120,7 @@ impl<const BASE: usize, const RX_IRQ: u16> Uart<BASE, RX_IRQ> {
         // Discard any stale byte. Under QEMU this read also matters: enabling RX does not
         // tell the emulator to look at its socket again, a DATA read does. Without it,
         // input that arrived while RX was still disabled waited for QEMU's next timer
-        // event, the SysTick wrap, 0.67 s later (seen in about 1 run in 7).
+        // event (then the SysTick wrap, 0.67 s later; seen in about 1 run in 7).
         let _ = uart.read_reg(DATA);
         // Drop a request left pending from before (the line has no handler).
         NVIC::unpend(Irq(RX_IRQ));
@@ -175,23 +175,29 @@ impl<const BASE: usize, const RX_IRQ: u16> Uart<BASE, RX_IRQ> {
     /// Sleeps until a byte has arrived (without taking it). Called with interrupts masked
     /// it still returns, but other pending interrupts then turn the sleep into polling.
     pub fn wait_readable(&mut self) {
-        let unmasked = cortex_m::register::primask::read().is_active();
         while !self.rx_full() {
-            cortex_m::interrupt::disable();
-            self.write_reg(CTRL, CTRL_TX_EN | CTRL_RX_EN | CTRL_RX_IRQ_EN);
-            // A byte that arrives after this check pends the interrupt, and WFI returns
-            // at once on a pending interrupt even with PRIMASK set.
-            if !self.rx_full() {
-                cortex_m::asm::wfi();
-            }
-            self.write_reg(CTRL, CTRL_TX_EN | CTRL_RX_EN);
-            self.write_reg(INTCLEAR, INT_RX);
-            NVIC::unpend(Irq(RX_IRQ));
-            if unmasked {
-                // SAFETY: interrupts were enabled on entry and masked only by this loop,
-                // so no critical section is broken; pending handlers (SysTick) run here.
-                unsafe { cortex_m::interrupt::enable() };
-            }
+            self.sleep_until_rx_or_interrupt();
+        }
+    }
+
+    /// Sleeps until a byte arrives or any other interrupt (the 1 ms SysTick) wakes the
+    /// core; returns at once if a byte is already waiting.
+    pub fn sleep_until_rx_or_interrupt(&mut self) {
+        let unmasked = cortex_m::register::primask::read().is_active();
+        cortex_m::interrupt::disable();
+        self.write_reg(CTRL, CTRL_TX_EN | CTRL_RX_EN | CTRL_RX_IRQ_EN);
+        // A byte that arrives after this check pends the interrupt, and WFI returns
+        // at once on a pending interrupt even with PRIMASK set.
+        if !self.rx_full() {
+            cortex_m::asm::wfi();
+        }
+        self.write_reg(CTRL, CTRL_TX_EN | CTRL_RX_EN);
+        self.write_reg(INTCLEAR, INT_RX);
+        NVIC::unpend(Irq(RX_IRQ));
+        if unmasked {
+            // SAFETY: interrupts were enabled on entry and masked only here, so no
+            // critical section is broken; pending handlers (SysTick) run now.
+            unsafe { cortex_m::interrupt::enable() };
         }
     }
 }

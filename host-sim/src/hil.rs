@@ -798,6 +798,7 @@ pub fn run_with<P: Port>(
     let mut current: Option<u8> = None;
     let mut reached: Vec<Option<Rigid>> = vec![None; wps.len()];
     let exec_start = Instant::now();
+    let mut last_report = Instant::now();
     let alpha = 1.0 - (-0.01 / ROBOT_LAG_S).exp();
     let mut done = false;
     let mut quiet_ticks = 0;
@@ -855,10 +856,18 @@ pub fn run_with<P: Port>(
         let in_gap = options
             .pose_gap_ms
             .is_some_and(|(from, len)| exec_ms >= from && exec_ms < from + len);
-        if !setpoints.is_empty() || (session.port.simulated_clock() && !in_gap) {
+        // Besides answering setpoints, a real robot reports at 100 Hz of its own clock
+        // whatever happens: after a watchdog stop, that is what lets setpoints resume.
+        let due = if session.port.simulated_clock() {
+            true
+        } else {
+            last_report.elapsed() >= Duration::from_millis(10)
+        };
+        if !setpoints.is_empty() || (due && !in_gap) {
             if !in_gap {
                 flange = tcp.after(&tcp_t_ee);
                 send_pose(session, robot_t_us, &flange)?;
+                last_report = Instant::now();
             }
             robot_t_us += 10_000;
         }
