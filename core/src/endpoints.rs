@@ -18,7 +18,7 @@
 
 use crate::error::Result;
 use crate::geom::{nearest, Frame, Rigid};
-use crate::kabsch;
+use crate::kabsch::{self, PairSums};
 use crate::skeleton::{RibEnds, SkeletonGraph};
 use crate::Vec3;
 use nalgebra::Matrix3;
@@ -89,10 +89,38 @@ pub fn match_endpoints(
 
 /// Rigid pose taking `src` onto `dst` from five starts (see the module docs), whatever
 /// their relative pose; `fs`, `fd` are their principal axes. Returns the pose and RMS.
-#[inline(never)]
 pub fn coarse_pose(src: &[Vec3], fs: &Frame, dst: &[Vec3], fd: &Frame) -> Result<(Rigid, f32)> {
-    let mut best: Option<(Rigid, f32)> = None;
-    for start in 0..5 {
+    let mut run = CoarsePose::new(fs, fd);
+    while !run.step(src, fs, dst, fd, u32::MAX)? {}
+    // Note: `step` returns `true` only after the fifth start, which sets the result.
+    run.result().ok_or(crate::error::Error::RigidFit)
+}
+
+/// [`coarse_pose`] in bounded steps (see [`Icp::step`]); the five starts run one after
+/// the other.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CoarsePose {
+    start: u8,
+    icp: Icp,
+    best: Option<(Rigid, f32)>,
+}
+
+impl CoarsePose {
+    /// Number of starts.
+    pub const STARTS: u8 = 5;
+
+    /// Before the first start; `fs`, `fd` as for [`coarse_pose`].
+    pub fn new(fs: &Frame, fd: &Frame) -> Self {
+        CoarsePose {
+            start: 0,
+            icp: Icp::new(Self::initial(0, fs, fd)),
+            best: None,
+        }
+    }
+
+    /// The initial pose of a start: centroid alignment, then the identity (start 0) or
+    /// the rotation taking `fs`'s axes with signs `(±1, ±1)` onto `fd`'s.
+    fn initial(start: u8, fs: &Frame, fd: &Frame) -> Rigid {
         let rotation = if start == 0 {
             Matrix3::identity()
         } else {
@@ -107,17 +135,44 @@ pub fn coarse_pose(src: &[Vec3], fs: &Frame, dst: &[Vec3], fd: &Frame) -> Result
             axes.set_column(2, &third);
             fd.axes * axes.transpose()
         };
-        let init = Rigid {
+        Rigid {
             rotation,
             translation: fd.origin - rotation * fs.origin,
-        };
-        let (pose, rms) = icp(src, dst, init, COARSE_ITERATIONS)?;
-        if best.is_none_or(|(_, b)| rms < b) {
-            best = Some((pose, rms));
         }
     }
-    // Note: the loop above runs five times and sets `best` on the first.
-    best.ok_or(crate::error::Error::RigidFit)
+
+    /// One bounded step of the current start's ICP ([`COARSE_ITERATIONS`] iterations);
+    /// `true` when all starts are done ([`CoarsePose::result`]). The arguments must be
+    /// the same at every call.
+    pub fn step(
+        &mut self,
+        src: &[Vec3],
+        fs: &Frame,
+        dst: &[Vec3],
+        fd: &Frame,
+        budget: u32,
+    ) -> Result<bool> {
+        if self.start >= Self::STARTS {
+            return Ok(true);
+        }
+        if !self.icp.step(src, dst, COARSE_ITERATIONS, budget)? {
+            return Ok(false);
+        }
+        let (pose, rms) = (self.icp.pose(), self.icp.rms());
+        if self.best.is_none_or(|(_, b)| rms < b) {
+            self.best = Some((pose, rms));
+        }
+        self.start += 1;
+        if self.start < Self::STARTS {
+            self.icp = Icp::new(Self::initial(self.start, fs, fd));
+        }
+        Ok(self.start >= Self::STARTS)
+    }
+
+    /// The best start's pose and RMS, once all are done.
+    pub fn result(&self) -> Option<(Rigid, f32)> {
+        (self.start >= Self::STARTS).then_some(self.best).flatten()
+    }
 }
 
 /// Largest source set of [`icp`] (a SOM-1 node set).
@@ -125,27 +180,107 @@ pub const ICP_CAPACITY: usize = crate::skeleton::SOM1_CAPACITY;
 
 /// Point-to-point ICP of `src` (at most [`ICP_CAPACITY`] points) onto `dst` from `pose`,
 /// `iterations` rounds; returns the pose and the RMS of the last pairing.
-#[inline(never)]
-pub fn icp(src: &[Vec3], dst: &[Vec3], mut pose: Rigid, iterations: usize) -> Result<(Rigid, f32)> {
-    if src.len() > ICP_CAPACITY {
-        return Err(crate::error::Error::Capacity {
-            capacity: ICP_CAPACITY as u32,
-        });
-    }
-    let mut rms = f32::INFINITY;
-    for _ in 0..iterations {
-        let mut paired = [Vec3::zeros(); ICP_CAPACITY];
-        let mut sum = 0.0;
-        for (p, q) in src.iter().zip(paired.iter_mut()) {
-            let m = pose.apply(p);
-            let (j, d2) = nearest(dst, &m).unwrap_or((0, 0.0));
-            *q = dst[j];
-            sum += d2;
+pub fn icp(src: &[Vec3], dst: &[Vec3], pose: Rigid, iterations: usize) -> Result<(Rigid, f32)> {
+    let mut run = Icp::new(pose);
+    while !run.step(src, dst, iterations, u32::MAX)? {}
+    Ok((run.pose(), run.rms()))
+}
+
+/// An [`icp`] in progress, for callers that bound the work per call: each
+/// [`Icp::step`] pairs at most `budget` source points with their nearest destination
+/// point (one scan of `dst` each), accumulating [`PairSums`]; the fit that ends an
+/// iteration is a call of its own. Nothing is buffered.
+///
+/// An iteration whose pairing equals the previous one ends the ICP early: the fit of an
+/// unchanged pairing is the current pose again, so every further iteration would repeat
+/// it, and the result is the same as running them all. Pairings are compared by a 64-bit
+/// FNV-1a hash of the paired indices (a collision, ~2⁻⁶⁴, would stop one pairing early).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Icp {
+    pose: Rigid,
+    iteration: u16,
+    cursor: u16,
+    sum_d2: f32,
+    rms: f32,
+    sums: PairSums,
+    pairing: u64,
+    previous: u64,
+}
+
+/// FNV-1a offset basis and prime (64-bit).
+const FNV_BASIS: u64 = 0xcbf2_9ce4_8422_2325;
+const FNV_PRIME: u64 = 0x0000_0100_0000_01b3;
+
+impl Icp {
+    /// An ICP starting from `pose`.
+    pub fn new(pose: Rigid) -> Self {
+        Icp {
+            pose,
+            iteration: 0,
+            cursor: 0,
+            sum_d2: 0.0,
+            rms: f32::INFINITY,
+            sums: PairSums::new(),
+            pairing: FNV_BASIS,
+            previous: 0,
         }
-        rms = libm::sqrtf(sum / src.len().max(1) as f32);
-        pose = kabsch::fit(src, &paired[..src.len()])?;
     }
-    Ok((pose, rms))
+
+    /// The current pose.
+    pub fn pose(&self) -> Rigid {
+        self.pose
+    }
+
+    /// RMS distance of the last complete pairing (infinite before the first).
+    pub fn rms(&self) -> f32 {
+        self.rms
+    }
+
+    /// One bounded step; `true` once `iterations` are done. `src`, `dst` and
+    /// `iterations` must be the same at every call.
+    pub fn step(
+        &mut self,
+        src: &[Vec3],
+        dst: &[Vec3],
+        iterations: usize,
+        budget: u32,
+    ) -> Result<bool> {
+        if src.len() > ICP_CAPACITY {
+            return Err(crate::error::Error::Capacity {
+                capacity: ICP_CAPACITY as u32,
+            });
+        }
+        if usize::from(self.iteration) >= iterations {
+            return Ok(true);
+        }
+        let cursor = usize::from(self.cursor);
+        if cursor < src.len() {
+            let end = cursor.saturating_add(budget as usize).min(src.len());
+            for p in &src[cursor..end] {
+                let m = self.pose.apply(p);
+                let (j, d2) = nearest(dst, &m).ok_or(crate::error::Error::RigidFit)?;
+                self.sums.add(p, &dst[j]);
+                self.sum_d2 += d2;
+                for byte in (j as u32).to_le_bytes() {
+                    self.pairing = (self.pairing ^ u64::from(byte)).wrapping_mul(FNV_PRIME);
+                }
+            }
+            // Note: end <= src.len() <= ICP_CAPACITY = 400.
+            self.cursor = end as u16;
+            return Ok(false);
+        }
+        self.rms = libm::sqrtf(self.sum_d2 / src.len().max(1) as f32);
+        if self.iteration > 0 && self.pairing == self.previous {
+            self.iteration = u16::MAX;
+            return Ok(true);
+        }
+        self.pose = self.sums.fit()?;
+        self.sums = PairSums::new();
+        (self.cursor, self.sum_d2) = (0, 0.0);
+        (self.previous, self.pairing) = (self.pairing, FNV_BASIS);
+        self.iteration = self.iteration.saturating_add(1);
+        Ok(usize::from(self.iteration) >= iterations)
+    }
 }
 
 /// Optimal one-to-one assignment for an 8×8 cost matrix: `assign[i]` is the column of

@@ -25,20 +25,26 @@ pub struct Poly {
     coeffs: [f64; MAX_DEGREE + 1],
 }
 
-/// Streaming least squares of a polynomial of degree ≤ 3: add points one at a time (no
-/// buffer, any number), then [`PolyFit::solve`]. The abscissa range must be known first.
+/// Streaming least squares of polynomials of degree ≤ 3 in one abscissa, for `M`
+/// ordinates at once (a rib's `y(x)` and `z(x)`): add points one at a time (no buffer,
+/// any number), then [`PolyFit::solve`]. The abscissa range must be known first.
+///
+/// The normal equations are kept as power sums `Σ sᵏ` (k ≤ 6, shared by the ordinates)
+/// and `Σ yₘ sᵏ` (k ≤ 3), all in `f64`: about 12 + 8·M soft-float operations per point
+/// on the Cortex-M4F. (`f32` sums, tried, fail the clustered-abscissae reference test.)
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PolyFit {
+pub struct PolyFit<const M: usize = 1> {
     center: f64,
     half_range: f64,
-    ata: Matrix4<f64>,
-    aty: Vector4<f64>,
+    inverse_half_range: f64,
+    powers: [f64; 2 * MAX_DEGREE + 1],
+    weighted: [[f64; MAX_DEGREE + 1]; M],
     count: usize,
 }
 
-impl PolyFit {
+impl<const M: usize> PolyFit<M> {
     /// An empty fit for abscissae in `lo..=hi` (`lo < hi`, finite).
-    pub fn new(lo: f32, hi: f32) -> Result<PolyFit> {
+    pub fn new(lo: f32, hi: f32) -> Result<Self> {
         let (lo, hi) = (f64::from(lo), f64::from(hi));
         let center = 0.5 * (lo + hi);
         let half_range = 0.5 * (hi - lo);
@@ -48,18 +54,26 @@ impl PolyFit {
         Ok(PolyFit {
             center,
             half_range,
-            ata: Matrix4::zeros(),
-            aty: Vector4::zeros(),
+            inverse_half_range: 1.0 / half_range,
+            powers: [0.0; 2 * MAX_DEGREE + 1],
+            weighted: [[0.0; MAX_DEGREE + 1]; M],
             count: 0,
         })
     }
 
-    /// Adds the point `(x, y)`.
-    pub fn add(&mut self, x: f32, y: f32) {
-        let s = (f64::from(x) - self.center) / self.half_range;
-        let pw = Vector4::new(1.0, s, s * s, s * s * s);
-        self.ata += pw * pw.transpose();
-        self.aty += pw * f64::from(y);
+    /// Adds the point `(x, y₁..y_M)`.
+    pub fn add(&mut self, x: f32, y: [f32; M]) {
+        let s = (f64::from(x) - self.center) * self.inverse_half_range;
+        let mut power = 1.0f64;
+        for k in 0..=2 * MAX_DEGREE {
+            self.powers[k] += power;
+            if k <= MAX_DEGREE {
+                for (w, &ym) in self.weighted.iter_mut().zip(&y) {
+                    w[k] += power * f64::from(ym);
+                }
+            }
+            power *= s;
+        }
         self.count += 1;
     }
 
@@ -68,39 +82,40 @@ impl PolyFit {
         self.count
     }
 
-    /// The least-squares polynomial of degree `degree ≤ 3`; needs more points than the
-    /// degree, at distinct abscissae.
-    pub fn solve(&self, degree: usize) -> Result<Poly> {
+    /// The least-squares polynomials (one per ordinate) of degree `degree ≤ 3`; needs
+    /// more points than the degree, at distinct abscissae.
+    pub fn solve(&self, degree: usize) -> Result<[Poly; M]> {
         if degree > MAX_DEGREE || self.count <= degree {
             return Err(Error::Config(
                 "polynomial fit needs degree <= 3 and more points than the degree",
             ));
         }
-        let mut ata = self.ata;
         // Unused degrees: identity rows keep the matrix SPD and their coefficients 0.
-        for r in 0..=MAX_DEGREE {
-            for c in 0..=MAX_DEGREE {
-                if r > degree || c > degree {
-                    ata[(r, c)] = if r == c { 1.0 } else { 0.0 };
-                }
-            }
-        }
-        let mut aty = self.aty;
-        for v in aty.iter_mut().skip(degree + 1) {
-            *v = 0.0;
-        }
+        let ata = Matrix4::from_fn(|r, c| match (r > degree || c > degree, r == c) {
+            (true, true) => 1.0,
+            (true, false) => 0.0,
+            (false, _) => self.powers[r + c],
+        });
         let chol = ata
             .cholesky()
             .ok_or(Error::Config("polynomial fit is singular"))?;
-        let sol = chol.solve(&aty);
-        if sol.iter().any(|v| !v.is_finite()) {
-            return Err(Error::Config("polynomial fit is singular"));
-        }
-        Ok(Poly {
+        let mut out = [Poly {
             center: self.center,
             half_range: self.half_range,
-            coeffs: [sol[0], sol[1], sol[2], sol[3]],
-        })
+            coeffs: [0.0; MAX_DEGREE + 1],
+        }; M];
+        for (poly, w) in out.iter_mut().zip(&self.weighted) {
+            let mut aty = Vector4::from(*w);
+            for v in aty.iter_mut().skip(degree + 1) {
+                *v = 0.0;
+            }
+            let sol = chol.solve(&aty);
+            if sol.iter().any(|v| !v.is_finite()) {
+                return Err(Error::Config("polynomial fit is singular"));
+            }
+            poly.coeffs = [sol[0], sol[1], sol[2], sol[3]];
+        }
+        Ok(out)
     }
 }
 
@@ -115,11 +130,12 @@ impl Poly {
         }
         let lo = x.iter().copied().fold(f32::INFINITY, f32::min);
         let hi = x.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-        let mut fit = PolyFit::new(lo, hi)?;
+        let mut fit = PolyFit::<1>::new(lo, hi)?;
         for (&xi, &yi) in x.iter().zip(y) {
-            fit.add(xi, yi);
+            fit.add(xi, [yi]);
         }
-        fit.solve(degree)
+        let [poly] = fit.solve(degree)?;
+        Ok(poly)
     }
 
     /// Value at `x`.

@@ -115,17 +115,16 @@ pub fn fit_ribs(
             ext[r] = (ext[r].0.min(x), ext[r].1.max(x));
         }
     }
-    let mut fits: [Option<(PolyFit, PolyFit)>; 4] = [None; 4];
+    let mut fits: [Option<PolyFit<2>>; 4] = [None; 4];
     for (f, &(lo, hi)) in fits.iter_mut().zip(&ext) {
         if lo < hi {
-            *f = Some((PolyFit::new(lo, hi)?, PolyFit::new(lo, hi)?));
+            *f = Some(PolyFit::new(lo, hi)?);
         }
     }
     for (i, p) in cloud.iter().enumerate().step_by(step) {
-        if let Some(Some((fy, fz))) = rib_of(label_of(i, p)).map(|r| &mut fits[r]) {
+        if let Some(Some(f)) = rib_of(label_of(i, p)).map(|r| &mut fits[r]) {
             let q = to_fit.apply(p);
-            fy.add(q.x, q.y);
-            fz.add(q.x, q.z);
+            f.add(q.x, [q.y, q.z]);
         }
     }
     // The midline: mean x of the sternum nodes (or the middle of the rib without them).
@@ -141,18 +140,15 @@ pub fn fit_ribs(
     let mut fractions = [0.5f32; 4];
     let mut offset = 0;
     for (r, &rib) in RIBS.iter().enumerate() {
-        let found = fits[r].map_or(0, |(fy, _)| fy.count());
+        let found = fits[r].map_or(0, |f| f.count());
         let short = Error::RibPath {
             cloud: which,
             rib,
             found: found.min(255) as u8,
             min: MIN_RIB_POINTS as u8,
         };
-        let (fy, fz) = fits[r].filter(|_| found >= MIN_RIB_POINTS).ok_or(short)?;
-        let (cy, cz) = (
-            fy.solve(3).map_err(|_| short)?,
-            fz.solve(3).map_err(|_| short)?,
-        );
+        let f = fits[r].filter(|_| found >= MIN_RIB_POINTS).ok_or(short)?;
+        let [cy, cz] = f.solve(3).map_err(|_| short)?;
         let (x0, x1) = ext[r];
         let mid = if sn > 0.0 {
             (sx / sn).clamp(x0, x1)

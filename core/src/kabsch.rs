@@ -35,41 +35,135 @@ type V3 = nalgebra::Vector3<f64>;
 /// Best rigid transform taking `a[i]` onto `b[i]`. Needs equal, non-zero lengths and a
 /// non-degenerate `a` (not all points coincident).
 pub fn fit(a: &[Vec3], b: &[Vec3]) -> Result<Rigid> {
-    let n = a.len();
-    if n == 0 || n != b.len() {
+    if a.is_empty() || a.len() != b.len() {
         return Err(Error::RigidFit);
     }
-    let ca = centroid64(a);
-    let cb = centroid64(b);
-    let mut h = M3::zeros();
+    let mut sums = PairSums::new();
     for (p, q) in a.iter().zip(b) {
-        h += (p.cast::<f64>() - ca) * (q.cast::<f64>() - cb).transpose();
+        sums.add(p, q);
     }
-    let scale = h.abs().max();
-    if !scale.is_finite() || scale <= 1e-12 * (1.0 + ca.norm_squared()) {
-        return Err(Error::RigidFit);
+    sums.fit()
+}
+
+/// Running sums of point pairs `(aᵢ, bᵢ)` for a one-pass [`fit`]: pairs can be added one
+/// at a time over several calls (the controller's bounded ICP steps) and nothing is
+/// buffered. Coordinates are taken relative to the first pair, so `H = Σ aᵢbᵢᵀ − n ā b̄ᵀ`
+/// loses no digits to points far from the origin. Each product is formed in `f32`
+/// (exact to the inputs' own `f32` rounding) and summed in `f32` over at most
+/// [`PAIRS_PER_FLUSH`] pairs, then added into `f64` totals: the `f64` work, soft-float on
+/// the Cortex-M4F, is one addition per [`PAIRS_PER_FLUSH`] pairs instead of ten
+/// multiply-adds per pair, and the cancellation in `H` happens in `f64`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PairSums {
+    n: u32,
+    origin_a: Vec3,
+    origin_b: Vec3,
+    sum_a: V3,
+    sum_b: V3,
+    sum_ab: M3,
+    part_n: u32,
+    part_a: Vec3,
+    part_b: Vec3,
+    part_ab: Matrix3<f32>,
+}
+
+/// Pairs summed in `f32` before their sums go into the `f64` totals of [`PairSums`].
+pub const PAIRS_PER_FLUSH: u32 = 8;
+
+impl Default for PairSums {
+    fn default() -> Self {
+        Self::new()
     }
-    // Normalise H: the rotation does not depend on its scale, and the check gets easier.
-    let h = h / scale;
-    let rotation = rotation_svd(&h)
-        .or_else(|| rotation_horn(&h))
-        .ok_or(Error::RigidFit)?;
-    let translation = cb - rotation * ca;
-    Ok(Rigid {
-        rotation: rotation.cast::<f32>(),
-        translation: translation.cast::<f32>(),
-    })
+}
+
+impl PairSums {
+    /// No pairs.
+    pub fn new() -> Self {
+        PairSums {
+            n: 0,
+            origin_a: Vec3::zeros(),
+            origin_b: Vec3::zeros(),
+            sum_a: V3::zeros(),
+            sum_b: V3::zeros(),
+            sum_ab: M3::zeros(),
+            part_n: 0,
+            part_a: Vec3::zeros(),
+            part_b: Vec3::zeros(),
+            part_ab: Matrix3::zeros(),
+        }
+    }
+
+    /// Pairs added.
+    pub fn len(&self) -> u32 {
+        self.n + self.part_n
+    }
+
+    /// True before the first pair.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Adds the pair `a → b`.
+    pub fn add(&mut self, a: &Vec3, b: &Vec3) {
+        if self.is_empty() {
+            (self.origin_a, self.origin_b) = (*a, *b);
+        }
+        let (a, b) = (a - self.origin_a, b - self.origin_b);
+        self.part_a += a;
+        self.part_b += b;
+        self.part_ab += a * b.transpose();
+        self.part_n += 1;
+        if self.part_n >= PAIRS_PER_FLUSH {
+            self.flush();
+        }
+    }
+
+    fn flush(&mut self) {
+        self.sum_a += self.part_a.cast::<f64>();
+        self.sum_b += self.part_b.cast::<f64>();
+        self.sum_ab += self.part_ab.cast::<f64>();
+        self.n = self.n.saturating_add(self.part_n);
+        self.part_n = 0;
+        self.part_a = Vec3::zeros();
+        self.part_b = Vec3::zeros();
+        self.part_ab = Matrix3::zeros();
+    }
+
+    /// The best rigid transform of the pairs added ([`fit`]).
+    pub fn fit(&self) -> Result<Rigid> {
+        let mut all = *self;
+        all.flush();
+        if all.n == 0 {
+            return Err(Error::RigidFit);
+        }
+        let n = f64::from(all.n);
+        let (ca, cb) = (all.sum_a / n, all.sum_b / n);
+        let h = all.sum_ab - ca * cb.transpose() * n;
+        let (ca, cb) = (
+            ca + all.origin_a.cast::<f64>(),
+            cb + all.origin_b.cast::<f64>(),
+        );
+        let scale = h.abs().max();
+        if !scale.is_finite() || scale <= 1e-12 * (1.0 + ca.norm_squared()) {
+            return Err(Error::RigidFit);
+        }
+        // Normalise H: the rotation does not depend on its scale, and the check gets easier.
+        let h = h / scale;
+        let rotation = rotation_svd(&h)
+            .or_else(|| rotation_horn(&h))
+            .ok_or(Error::RigidFit)?;
+        let translation = cb - rotation * ca;
+        Ok(Rigid {
+            rotation: rotation.cast::<f32>(),
+            translation: translation.cast::<f32>(),
+        })
+    }
 }
 
 /// Mean of a slice (zero for an empty one).
 pub fn centroid(points: &[Vec3]) -> Vec3 {
     let sum = points.iter().fold(Vec3::zeros(), |s, p| s + p);
     sum / points.len().max(1) as f32
-}
-
-fn centroid64(points: &[Vec3]) -> V3 {
-    let sum = points.iter().fold(V3::zeros(), |s, p| s + p.cast::<f64>());
-    sum / points.len().max(1) as f64
 }
 
 fn rotation_svd(h: &M3) -> Option<M3> {
@@ -122,6 +216,11 @@ fn is_rotation(r: &M3) -> bool {
 mod tests {
     use super::*;
     use nalgebra::{Rotation3, Unit};
+
+    fn centroid64(points: &[Vec3]) -> V3 {
+        let sum = points.iter().fold(V3::zeros(), |s, p| s + p.cast::<f64>());
+        sum / points.len().max(1) as f64
+    }
 
     fn cloud() -> [Vec3; 10] {
         core::array::from_fn(|i| {
