@@ -65,6 +65,8 @@ pub struct VoxelCloud<const CAP: usize> {
     level: u8,
     max_level: u8,
     finished: bool,
+    /// Voxels turned into centroids (after the first [`VoxelCloud::finish_some`]).
+    converted: usize,
     /// Counters.
     pub stats: VoxelStats,
 }
@@ -90,6 +92,7 @@ impl<const CAP: usize> VoxelCloud<CAP> {
             level: 0,
             max_level: 0,
             finished: false,
+            converted: 0,
             stats: VoxelStats {
                 accepted: 0,
                 merged: 0,
@@ -115,6 +118,7 @@ impl<const CAP: usize> VoxelCloud<CAP> {
         self.level = 0;
         self.max_level = max_coarsenings;
         self.finished = false;
+        self.converted = 0;
         self.stats = VoxelStats::default();
         Ok(())
     }
@@ -239,15 +243,24 @@ impl<const CAP: usize> VoxelCloud<CAP> {
     /// The cloud accepts no more points afterwards; calling it again returns the same
     /// slice.
     pub fn finish(&mut self) -> &[Vec3] {
-        if !self.finished {
-            for i in 0..self.len {
-                let c = self.corner(self.codes[i]);
-                let mean = self.sums[i].cast::<f64>() / f64::from(self.counts[i].max(1));
-                self.sums[i] = (c + mean).cast::<f32>();
-            }
-            self.finished = true;
-        }
+        while !self.finish_some(usize::MAX) {}
         &self.sums[..self.len]
+    }
+
+    /// [`VoxelCloud::finish`] in bounded steps: turns at most `budget` more voxels into
+    /// their centroids (about a thousand soft-float instructions each on the
+    /// Cortex-M4F); `true` when all are. The cloud accepts no more points from the
+    /// first call on.
+    pub fn finish_some(&mut self, budget: usize) -> bool {
+        self.finished = true;
+        let end = self.converted.saturating_add(budget).min(self.len);
+        for i in self.converted..end {
+            let c = self.corner(self.codes[i]);
+            let mean = self.sums[i].cast::<f64>() / f64::from(self.counts[i].max(1));
+            self.sums[i] = (c + mean).cast::<f32>();
+        }
+        self.converted = end;
+        end >= self.len
     }
 }
 

@@ -17,9 +17,11 @@
 //!   [`NackCode::BadState`] / [`NackCode::Invalid`]: it counts as handled, the host must
 //!   not re-send it.
 //! * **Sweep**: poses and frames go into a [`Compounder`] (lag-corrected poses).
-//! * **Registration** runs in [`Controller::poll`], [`SOM_ITERATIONS_PER_POLL`] SOM
-//!   iterations per call, so pose handling between calls is never starved; the mapped
-//!   waypoints become probe targets (on the skin side of the local bone surface, beam
+//! * **Registration** runs in [`Controller::poll`] in bounded steps — the voxel
+//!   centroids ([`VOXELS_FINISHED_PER_POLL`] a call), then [`SOM_ITERATIONS_PER_POLL`]
+//!   units of registration work a call (see [`Registering`]), then one waypoint a call —
+//!   so pose handling between calls is never starved; the mapped waypoints become probe
+//!   targets (on the skin side of the local bone surface, beam
 //!   along its inward normal, footprint along the gap) and are reported with a quality
 //!   figure (the local rigid fit's RMS residual).
 //! * **Execution**: setpoints every [`SETPOINT_PERIOD_US`] along straight segments with
@@ -60,10 +62,15 @@ pub const POSE_TIMEOUT_US: u64 = 50_000;
 pub const SETPOINT_PERIOD_US: u64 = 10_000;
 /// Time the probe rests at each target, µs.
 pub const DWELL_US: u64 = 500_000;
-/// SOM iterations per registration step. One iteration of SOM 1 costs about 12,000
-/// instructions on the Cortex-M4F (BMU search over 400 nodes and the neighbourhood
-/// update), so 8 keep a step near 0.1 M instructions (README, "Controller").
+/// Units of work per registration step ([`Registering::step`]'s budget: SOM iterations,
+/// node-set scans or rigid fits). One iteration of SOM 1 costs about 8,000 instructions
+/// on the Cortex-M4F (BMU search over 400 nodes and the neighbourhood update), so 8 keep
+/// a step near 0.1 M instructions (README, "Controller and firmware").
 pub const SOM_ITERATIONS_PER_POLL: u32 = 8;
+/// Voxels turned into centroids per [`Controller::poll`] before the registration starts:
+/// ~1,800 instructions each on the emulated Cortex-M4F (10 calls of 96 took 1.79 M, the
+/// worst 187 k), so 64 stay near 120 k.
+pub const VOXELS_FINISHED_PER_POLL: usize = 64;
 /// Replies waiting to be sent: a poll emits at most one setpoint or fault and the
 /// results, a received frame one reply; 32 covers a whole result (≤ 32 waypoints).
 pub const OUTBOX: usize = 40;
@@ -463,7 +470,9 @@ impl<const VOXELS: usize> Controller<VOXELS> {
             }
             Command::EndSweep => {
                 self.require(&[Sweeping])?;
-                self.sweep.cloud.finish();
+                // Closes the cloud; the voxels become centroids in bounded steps in
+                // `poll` before the registration starts.
+                self.sweep.cloud.finish_some(0);
                 self.cloud_ready = true;
                 self.state = TemplateLoaded;
                 Ok(())
@@ -473,11 +482,11 @@ impl<const VOXELS: usize> Controller<VOXELS> {
                 if !self.cloud_ready {
                     return Err(NackCode::BadState);
                 }
-                let cloud = self.sweep.cloud.finish();
-                if cloud.len() < MIN_CLOUD_POINTS {
+                let points = self.sweep.cloud.len();
+                if points < MIN_CLOUD_POINTS {
                     return Err(invalid(Error::TooFewPoints {
                         cloud: crate::error::Cloud::Target,
-                        found: cloud.len() as u32,
+                        found: points as u32,
                         min: MIN_CLOUD_POINTS as u32,
                     }));
                 }
@@ -582,7 +591,12 @@ impl<const VOXELS: usize> Controller<VOXELS> {
     fn register_step(&mut self) {
         let cfg = Config::improved();
         if self.registering.is_none() {
-            self.start_registration(&cfg);
+            // First the voxel centroids, then the registration's set-up, each in calls of
+            // their own.
+            if self.sweep.cloud.finish_some(VOXELS_FINISHED_PER_POLL) {
+                self.targets.clear();
+                self.start_registration(&cfg);
+            }
             return;
         }
         let (Some(r), Some(template)) = (&mut self.registering, &self.template) else {
@@ -590,34 +604,38 @@ impl<const VOXELS: usize> Controller<VOXELS> {
             return;
         };
         let cloud = self.sweep.cloud.finish();
-        match r.step(template, cloud, &cfg, SOM_ITERATIONS_PER_POLL) {
-            Ok(false) => {}
-            Ok(true) => {
-                let mapped = match r.registration() {
-                    Some(reg) => targets(
+        let outcome = match r.step(template, cloud, &cfg, SOM_ITERATIONS_PER_POLL) {
+            Ok(false) => return,
+            // Then one waypoint per call.
+            Ok(true) => match (r.registration(), self.waypoints.get(self.targets.len())) {
+                (Some(reg), Some(w)) => {
+                    let t = target(
                         reg,
-                        &self.waypoints,
+                        w,
                         cloud,
                         self.settings.as_ref(),
                         self.probe_sum,
                         self.probe_count,
-                        &mut self.targets,
-                    ),
-                    None => Err(Error::Config("the registration did not finish")),
-                };
-                self.registering = None;
-                match mapped {
-                    Ok(()) => {
-                        self.state = State::Ready;
-                        let _ = self.command(Command::Result, 0);
+                    );
+                    // Note: a push cannot fail, waypoints and targets share MAX_WAYPOINTS.
+                    match t.map(|t| self.targets.push(t)) {
+                        Ok(_) if self.targets.len() < self.waypoints.len() => return,
+                        Ok(_) => Ok(()),
+                        Err(e) => Err(e),
                     }
-                    Err(e) => self.fail(e),
                 }
+                (Some(_), None) => Ok(()),
+                (None, _) => Err(Error::Config("the registration did not finish")),
+            },
+            Err(e) => Err(e),
+        };
+        self.registering = None;
+        match outcome {
+            Ok(()) => {
+                self.state = State::Ready;
+                let _ = self.command(Command::Result, 0);
             }
-            Err(e) => {
-                self.registering = None;
-                self.fail(e);
-            }
+            Err(e) => self.fail(e),
         }
     }
 
@@ -626,6 +644,16 @@ impl<const VOXELS: usize> Controller<VOXELS> {
         match crate::pipeline::Registering::start(self.sweep.cloud.finish(), cfg) {
             Ok(r) => self.registering = Some(r),
             Err(e) => self.fail(e),
+        }
+    }
+
+    /// What the registration works on (see [`Registering::stage`]), for cost reports:
+    /// `"centroids"` before it starts, `None` when not registering.
+    pub fn registration_stage(&self) -> Option<&'static str> {
+        match (&self.registering, self.state) {
+            (Some(r), State::Registering) => Some(r.stage()),
+            (None, State::Registering) => Some("centroids"),
+            _ => None,
         }
     }
 
@@ -703,36 +731,30 @@ impl<const VOXELS: usize> Controller<VOXELS> {
     }
 }
 
-/// Maps the waypoints and turns them into probe targets (into `out`).
+/// Maps one waypoint and turns it into a probe target.
 #[inline(never)]
-fn targets(
+fn target(
     reg: &Registration,
-    waypoints: &[Vec3],
+    w: &Vec3,
     cloud: &[Vec3],
     settings: Option<&Settings>,
     probe_sum: Vec3,
     probe_count: u32,
-    out: &mut heapless::Vec<ProbeTarget, MAX_WAYPOINTS>,
-) -> Result<()> {
+) -> Result<ProbeTarget> {
     let s = settings.ok_or(Error::Config("no configuration"))?;
     let skin = if probe_count > 0 {
         probe_sum / probe_count as f32
     } else {
         Vec3::zeros()
     };
-    out.clear();
-    for w in waypoints {
-        let (t, quality_mm) = reg.map.transform_with_residual(w)?;
-        let p = t.apply(w);
-        let tcp = probe_pose(cloud, &p, &skin, s.standoff);
-        // Note: at most MAX_WAYPOINTS waypoints, the capacity.
-        let _ = out.push(ProbeTarget {
-            waypoint: p,
-            tcp,
-            quality_mm,
-        });
-    }
-    Ok(())
+    let (t, quality_mm) = reg.map.transform_with_residual(w)?;
+    let p = t.apply(w);
+    let tcp = probe_pose(cloud, &p, &skin, s.standoff);
+    Ok(ProbeTarget {
+        waypoint: p,
+        tcp,
+        quality_mm,
+    })
 }
 
 fn finite(p: &[f32; 3]) -> bool {

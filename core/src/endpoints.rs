@@ -330,6 +330,40 @@ pub fn best_assignment(cost: &[[f32; 8]; 8]) -> ([u8; 8], f32) {
 mod tests {
     use super::*;
 
+    /// The early stop on a repeated pairing gives what running every iteration gives
+    /// (one iteration per `icp` call never stops early), bit for bit, and the bounded
+    /// steps give the same as one unbounded run.
+    #[test]
+    fn icp_early_stop_and_steps_are_exact() {
+        let src: [Vec3; 60] = core::array::from_fn(|i| {
+            let t = i as f32;
+            Vec3::new(
+                3.0 * t,
+                25.0 * libm::sinf(t * 0.31),
+                10.0 * libm::cosf(t * 0.17) + 0.05 * t * t,
+            )
+        });
+        let motion = Rigid {
+            rotation: *nalgebra::Rotation3::from_euler_angles(0.2, -0.1, 0.3).matrix(),
+            translation: Vec3::new(5.0, -3.0, 2.0),
+        };
+        let dst = src.map(|p| motion.apply(&p) + Vec3::new(0.0, 0.1, 0.0));
+        let (fast, fast_rms) = icp(&src, &dst, Rigid::identity(), 30).unwrap();
+        let (mut slow, mut slow_rms) = (Rigid::identity(), f32::INFINITY);
+        for _ in 0..30 {
+            (slow, slow_rms) = icp(&src, &dst, slow, 1).unwrap();
+        }
+        assert_eq!((fast, fast_rms), (slow, slow_rms));
+        let mut run = Icp::new(Rigid::identity());
+        let mut calls = 0;
+        while !run.step(&src, &dst, 30, 7).unwrap() {
+            calls += 1;
+        }
+        assert_eq!((run.pose(), run.rms()), (fast, fast_rms));
+        assert!(calls > 60 / 7, "{calls}");
+        assert!(fast_rms < 0.2, "{fast_rms}");
+    }
+
     #[test]
     fn assignment_finds_the_permutation() {
         let perm = [3u8, 0, 7, 1, 6, 2, 5, 4];

@@ -29,7 +29,7 @@
 //!    template nodes more closely onto the target than a rigid pose can, and their
 //!    Kabsch fit giving the next round's fitting frame.
 
-use crate::endpoints::{coarse_pose, icp};
+use crate::endpoints::{CoarsePose, Icp};
 use crate::error::{Cloud, Error, Result};
 use crate::fit::{equal_steps, PolyFit};
 use crate::geom::{nearest, Rigid};
@@ -106,76 +106,348 @@ pub fn fit_ribs(
     split: Option<&[f32; 4]>,
     which: Cloud,
 ) -> Result<([Vec3; SKELETON_POINTS], [f32; 4])> {
-    let step = cloud.len().div_ceil(FIT_SAMPLES).max(1);
-    let rib_of = |l: u8| RIBS.iter().position(|&rib| rib == l);
-    let mut ext = [(f32::INFINITY, f32::NEG_INFINITY); 4];
-    for (p, &l) in nodes.iter().zip(node_labels) {
-        if let Some(r) = rib_of(l) {
+    let mut fits = RibFits::new(nodes, node_labels, to_fit)?;
+    for (i, p) in cloud.iter().enumerate().step_by(fit_stride(cloud.len())) {
+        fits.add(label_of(i, p), p);
+    }
+    fits.finish(split, which)
+}
+
+/// The stride of the cloud points entering [`fit_ribs`] (at most [`FIT_SAMPLES`]).
+pub fn fit_stride(points: usize) -> usize {
+    points.div_ceil(FIT_SAMPLES).max(1)
+}
+
+/// [`fit_ribs`] one point at a time: the rib extents and the midline from the nodes,
+/// the streaming cubic fits of each rib.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RibFits {
+    to_fit: Rigid,
+    ext: [(f32, f32); 4],
+    fits: [Option<PolyFit<2>>; 4],
+    /// Sum and count of the sternum nodes' x.
+    sternum: (f32, f32),
+}
+
+fn rib_of(label: u8) -> Option<usize> {
+    RIBS.iter().position(|&rib| rib == label)
+}
+
+impl RibFits {
+    /// Extents (per rib, of its labelled nodes' x in the frame `to_fit`) and midline.
+    pub fn new(nodes: &[Vec3], node_labels: &[u8], to_fit: &Rigid) -> Result<Self> {
+        let mut ext = [(f32::INFINITY, f32::NEG_INFINITY); 4];
+        let (mut sx, mut sn) = (0.0f32, 0.0f32);
+        for (p, &l) in nodes.iter().zip(node_labels) {
             let x = to_fit.apply(p).x;
-            ext[r] = (ext[r].0.min(x), ext[r].1.max(x));
+            if let Some(r) = rib_of(l) {
+                ext[r] = (ext[r].0.min(x), ext[r].1.max(x));
+            } else if l == 1 {
+                sx += x;
+                sn += 1.0;
+            }
         }
-    }
-    let mut fits: [Option<PolyFit<2>>; 4] = [None; 4];
-    for (f, &(lo, hi)) in fits.iter_mut().zip(&ext) {
-        if lo < hi {
-            *f = Some(PolyFit::new(lo, hi)?);
+        let mut fits = [None; 4];
+        for (f, &(lo, hi)) in fits.iter_mut().zip(&ext) {
+            if lo < hi {
+                *f = Some(PolyFit::new(lo, hi)?);
+            }
         }
+        Ok(RibFits {
+            to_fit: *to_fit,
+            ext,
+            fits,
+            sternum: (sx, sn),
+        })
     }
-    for (i, p) in cloud.iter().enumerate().step_by(step) {
-        if let Some(Some(f)) = rib_of(label_of(i, p)).map(|r| &mut fits[r]) {
-            let q = to_fit.apply(p);
+
+    /// Adds a cloud point with its label (points of no rib are ignored).
+    pub fn add(&mut self, label: u8, p: &Vec3) {
+        if let Some(Some(f)) = rib_of(label).map(|r| &mut self.fits[r]) {
+            let q = self.to_fit.apply(p);
             f.add(q.x, [q.y, q.z]);
         }
     }
-    // The midline: mean x of the sternum nodes (or the middle of the rib without them).
-    let (mut sx, mut sn) = (0.0f32, 0.0f32);
-    for (p, &l) in nodes.iter().zip(node_labels) {
-        if l == 1 {
-            sx += to_fit.apply(p).x;
-            sn += 1.0;
-        }
-    }
-    let back = to_fit.inverse();
-    let mut points = [Vec3::zeros(); SKELETON_POINTS];
-    let mut fractions = [0.5f32; 4];
-    let mut offset = 0;
-    for (r, &rib) in RIBS.iter().enumerate() {
-        let found = fits[r].map_or(0, |f| f.count());
-        let short = Error::RibPath {
-            cloud: which,
-            rib,
-            found: found.min(255) as u8,
-            min: MIN_RIB_POINTS as u8,
-        };
-        let f = fits[r].filter(|_| found >= MIN_RIB_POINTS).ok_or(short)?;
-        let [cy, cz] = f.solve(3).map_err(|_| short)?;
-        let (x0, x1) = ext[r];
-        let mid = if sn > 0.0 {
-            (sx / sn).clamp(x0, x1)
-        } else {
-            0.5 * (x0 + x1)
-        };
-        fractions[r] = (mid - x0) / (x1 - x0);
-        // Stations at equal fractions of the rib; with `split` (the template's midline
-        // fractions) each side of the midline scales on its own, so a rib end missing on
-        // one side moves that side's stations only.
-        let fm = split.map_or(fractions[r], |s| s[r]).clamp(1e-3, 1.0 - 1e-3);
-        for (k, f) in equal_steps(0.0, 1.0, RIB_SAMPLES[r]).enumerate() {
-            let x = if f <= fm {
-                x0 + (mid - x0) * f / fm
-            } else {
-                mid + (x1 - mid) * (f - fm) / (1.0 - fm)
+
+    /// The 30 skeleton points and the sternum fractions (see [`fit_ribs`]).
+    pub fn finish(
+        &self,
+        split: Option<&[f32; 4]>,
+        which: Cloud,
+    ) -> Result<([Vec3; SKELETON_POINTS], [f32; 4])> {
+        let (sx, sn) = self.sternum;
+        let back = self.to_fit.inverse();
+        let mut points = [Vec3::zeros(); SKELETON_POINTS];
+        let mut fractions = [0.5f32; 4];
+        let mut offset = 0;
+        for (r, &rib) in RIBS.iter().enumerate() {
+            let found = self.fits[r].map_or(0, |f| f.count());
+            let short = Error::RibPath {
+                cloud: which,
+                rib,
+                found: found.min(255) as u8,
+                min: MIN_RIB_POINTS as u8,
             };
-            points[offset + k] = back.apply(&Vec3::new(x, cy.eval(x), cz.eval(x)));
+            let f = self.fits[r]
+                .filter(|_| found >= MIN_RIB_POINTS)
+                .ok_or(short)?;
+            let [cy, cz] = f.solve(3).map_err(|_| short)?;
+            let (x0, x1) = self.ext[r];
+            let mid = if sn > 0.0 {
+                (sx / sn).clamp(x0, x1)
+            } else {
+                0.5 * (x0 + x1)
+            };
+            fractions[r] = (mid - x0) / (x1 - x0);
+            // Stations at equal fractions of the rib; with `split` (the template's
+            // midline fractions) each side of the midline scales on its own, so a rib end
+            // missing on one side moves that side's stations only.
+            let fm = split.map_or(fractions[r], |s| s[r]).clamp(1e-3, 1.0 - 1e-3);
+            for (k, f) in equal_steps(0.0, 1.0, RIB_SAMPLES[r]).enumerate() {
+                let x = if f <= fm {
+                    x0 + (mid - x0) * f / fm
+                } else {
+                    mid + (x1 - mid) * (f - fm) / (1.0 - fm)
+                };
+                points[offset + k] = back.apply(&Vec3::new(x, cy.eval(x), cz.eval(x)));
+            }
+            offset += RIB_SAMPLES[r];
         }
-        offset += RIB_SAMPLES[r];
+        Ok((points, fractions))
     }
-    Ok((points, fractions))
+}
+
+/// Where a [`TargetSkeleton`] is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GuidedStage {
+    /// Five-start key-point ICP ([`CoarsePose`]).
+    Coarse,
+    /// ICP of all SOM-1 nodes from the coarse pose.
+    Refine,
+    /// Round `r`: each target node takes its carried template node's label.
+    Label(u8),
+    /// Round `r`: cloud points labelled by their nearest node enter the rib fits.
+    Fit(u8),
+    /// Round `r`: the rib fits are solved into the 30 skeleton points.
+    Solve(u8),
+    /// Round `r`: the skeleton pairs' Kabsch fit (next fitting frame) and mapping.
+    Refit(u8),
+    /// Round `r`: the template nodes carried by that mapping.
+    Carry(u8),
+    /// Done ([`TargetSkeleton::result`]).
+    Done,
+}
+
+/// Template-guided target skeleton (the module's steps 1–4) in bounded steps, for the
+/// controller's 100 Hz loop: every [`TargetSkeleton::step`] does at most `budget` units
+/// of work, a unit being one nearest-neighbour scan of a node set (at most
+/// [`SOM1_CAPACITY`] distances, about as much as one SOM iteration) with what goes with
+/// it, or one rigid fit; a stage change is a call of its own. The state lives here (about
+/// 10 KiB: the carried nodes, labels, the mapping's transform cache), not on the stack.
+/// [`target_skeleton`] runs it to the end.
+pub struct TargetSkeleton {
+    stage: GuidedStage,
+    cursor: u32,
+    coarse: CoarsePose,
+    icp: Icp,
+    pose: Rigid,
+    carried: heapless::Vec<Vec3, SOM1_CAPACITY>,
+    labels: NodeLabels,
+    ribs: Option<RibFits>,
+    skeleton: [Vec3; SKELETON_POINTS],
+    map: Option<LocalRigid>,
+    cache: TransformCache<CARRY_CACHE>,
+}
+
+/// Transform cache of the carried-node mapping: 64 entries × ~60 B ≈ 3.8 KiB. A full
+/// cache only refits (see [`TransformCache`]); with 16 entries the carry refitted at
+/// almost every node and cost 76 M instructions on the emulated controller.
+pub const CARRY_CACHE: usize = 64;
+
+impl TargetSkeleton {
+    /// Before the coarse pose of `target` (its key points and frame) onto `template`'s
+    /// SOM-1 nodes; `template_labels` must label those nodes.
+    pub fn start(
+        target: &SkeletonGraph,
+        template: &SkeletonGraph,
+        template_labels: &[u8],
+    ) -> Result<Self> {
+        if template_labels.len() != template.som1.len() {
+            return Err(Error::Config(
+                "the guided rib model needs a labelled template",
+            ));
+        }
+        Ok(TargetSkeleton {
+            stage: GuidedStage::Coarse,
+            cursor: 0,
+            coarse: CoarsePose::new(&target.frame, &template.frame),
+            icp: Icp::new(Rigid::identity()),
+            pose: Rigid::identity(),
+            carried: heapless::Vec::new(),
+            labels: NodeLabels::new(),
+            ribs: None,
+            skeleton: [Vec3::zeros(); SKELETON_POINTS],
+            map: None,
+            cache: TransformCache::new(),
+        })
+    }
+
+    /// The current stage.
+    pub fn stage(&self) -> GuidedStage {
+        self.stage
+    }
+
+    /// The rigid pose target → template (the last fitting frame) and the 30 target
+    /// skeleton points, once done.
+    pub fn result(&self) -> Option<(Rigid, [Vec3; SKELETON_POINTS])> {
+        (self.stage == GuidedStage::Done).then_some((self.pose, self.skeleton))
+    }
+
+    /// At most `budget` units of work (see the type's docs); `true` when done. The
+    /// arguments must be the same at every call: the target `cloud` and its skeleton
+    /// graph, the template's graph, node labels, 30 skeleton points and sternum split,
+    /// and `N_r`.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(never)]
+    pub fn step(
+        &mut self,
+        cloud: &[Vec3],
+        target: &SkeletonGraph,
+        template: &SkeletonGraph,
+        template_labels: &[u8],
+        template_skeleton: &[Vec3; SKELETON_POINTS],
+        template_split: &[f32; 4],
+        neighbours: usize,
+        budget: u32,
+    ) -> Result<bool> {
+        let budget = budget.max(1) as usize;
+        let cursor = self.cursor as usize;
+        let last_round = GUIDED_ROUNDS as u8 - 1;
+        match self.stage {
+            GuidedStage::Coarse => {
+                if self.coarse.step(
+                    &target.key_points,
+                    &target.frame,
+                    &template.som1,
+                    &template.frame,
+                    budget as u32,
+                )? {
+                    let (coarse, _) = self.coarse.result().ok_or(Error::RigidFit)?;
+                    self.icp = Icp::new(coarse);
+                    self.stage = GuidedStage::Refine;
+                }
+            }
+            GuidedStage::Refine => {
+                if self.icp.step(
+                    &target.som1,
+                    &template.som1,
+                    REFINE_ITERATIONS,
+                    budget as u32,
+                )? {
+                    self.pose = self.icp.pose();
+                    let inverse = self.pose.inverse();
+                    self.carried.clear();
+                    for p in &template.som1 {
+                        // Note: as many as the template's nodes, at most the capacity.
+                        let _ = self.carried.push(inverse.apply(p));
+                    }
+                    self.begin(GuidedStage::Label(0));
+                }
+            }
+            GuidedStage::Label(round) => {
+                let end = cursor.saturating_add(budget).min(target.som1.len());
+                for p in &target.som1[cursor.min(end)..end] {
+                    let label = match nearest(&self.carried, p) {
+                        Some((j, d2)) if d2 <= LABEL_RADIUS_MM * LABEL_RADIUS_MM => {
+                            template_labels.get(j).copied().unwrap_or(0)
+                        }
+                        _ => 0,
+                    };
+                    // Note: one label per node, and there are at most SOM1_CAPACITY nodes.
+                    let _ = self.labels.push(label);
+                }
+                self.cursor = end as u32;
+                if end >= target.som1.len() {
+                    self.ribs = Some(RibFits::new(&target.som1, &self.labels, &self.pose)?);
+                    self.begin(GuidedStage::Fit(round));
+                }
+            }
+            GuidedStage::Fit(round) => {
+                let stride = fit_stride(cloud.len());
+                let ribs = self.ribs.as_mut().ok_or(Error::RigidFit)?;
+                let mut i = cursor;
+                for _ in 0..budget {
+                    let Some(p) = cloud.get(i) else { break };
+                    let label = match nearest(&target.som1, p) {
+                        Some((j, d2)) if d2 <= LABEL_RADIUS_MM * LABEL_RADIUS_MM => {
+                            self.labels.get(j).copied().unwrap_or(0)
+                        }
+                        _ => 0,
+                    };
+                    ribs.add(label, p);
+                    i = i.saturating_add(stride);
+                }
+                self.cursor = i.min(cloud.len()) as u32;
+                if i >= cloud.len() {
+                    self.stage = GuidedStage::Solve(round);
+                }
+            }
+            GuidedStage::Solve(round) => {
+                let ribs = self.ribs.take().ok_or(Error::RigidFit)?;
+                (self.skeleton, _) = ribs.finish(Some(template_split), Cloud::Target)?;
+                self.stage = if round < last_round {
+                    GuidedStage::Refit(round)
+                } else {
+                    GuidedStage::Done
+                };
+            }
+            GuidedStage::Refit(round) => {
+                // The fitting frame of the next round: the rigid part of the skeleton
+                // pairing (exact for a rigidly moved copy, unlike the ICP pose of surface
+                // samples), and the mapping that carries the template nodes.
+                self.pose = kabsch::fit(&self.skeleton, template_skeleton)?;
+                self.map = Some(LocalRigid::new(
+                    *template_skeleton,
+                    self.skeleton,
+                    neighbours,
+                )?);
+                self.cache = TransformCache::new();
+                self.begin(GuidedStage::Carry(round));
+            }
+            GuidedStage::Carry(round) => {
+                let map = self.map.as_ref().ok_or(Error::RigidFit)?;
+                let n = self.carried.len().min(template.som1.len());
+                let (mut i, mut done) = (cursor, 0);
+                // `budget` nodes, but at most one new neighbourhood fit per call.
+                let fits = self.cache.fits;
+                while i < n && done < budget && self.cache.fits == fits {
+                    self.carried[i] = map.map_point(&template.som1[i], &mut self.cache)?;
+                    i += 1;
+                    done += 1;
+                }
+                self.cursor = i as u32;
+                if i >= n {
+                    self.labels.clear();
+                    self.begin(GuidedStage::Label(round + 1));
+                }
+            }
+            GuidedStage::Done => return Ok(true),
+        }
+        Ok(false)
+    }
+
+    fn begin(&mut self, stage: GuidedStage) {
+        if matches!(stage, GuidedStage::Label(_)) {
+            self.labels.clear();
+        }
+        self.stage = stage;
+        self.cursor = 0;
+    }
 }
 
 /// Target skeleton paired with `template_skeleton`, guided by the template's labelled
-/// nodes. Returns the rigid pose target → template and the 30 target points.
-#[inline(never)]
+/// nodes: [`TargetSkeleton`] run to the end. Returns the rigid pose target → template
+/// and the 30 target points.
 pub fn target_skeleton(
     cloud: &[Vec3],
     target: &SkeletonGraph,
@@ -185,54 +457,16 @@ pub fn target_skeleton(
     template_split: &[f32; 4],
     neighbours: usize,
 ) -> Result<(Rigid, [Vec3; SKELETON_POINTS])> {
-    if template_labels.len() != template.som1.len() {
-        return Err(Error::Config(
-            "the guided rib model needs a labelled template",
-        ));
-    }
-    let (coarse, _) = coarse_pose(
-        &target.key_points,
-        &target.frame,
-        &template.som1,
-        &template.frame,
-    )?;
-    let (mut pose, _) = icp(&target.som1, &template.som1, coarse, REFINE_ITERATIONS)?;
-    let inverse = pose.inverse();
-    let mut carried: heapless::Vec<Vec3, SOM1_CAPACITY> =
-        template.som1.iter().map(|p| inverse.apply(p)).collect();
-    let mut skeleton = [Vec3::zeros(); SKELETON_POINTS];
-    for round in 0..GUIDED_ROUNDS {
-        let mut labels = NodeLabels::new();
-        for p in &target.som1 {
-            let label = match nearest(&carried, p) {
-                Some((j, d2)) if d2 <= LABEL_RADIUS_MM * LABEL_RADIUS_MM => template_labels[j],
-                _ => 0,
-            };
-            // Note: one label per node, and there are at most SOM1_CAPACITY nodes.
-            let _ = labels.push(label);
-        }
-        (skeleton, _) = fit_ribs(
-            cloud,
-            &target.som1,
-            &labels,
-            &pose,
-            |_, p| match nearest(&target.som1, p) {
-                Some((j, d2)) if d2 <= LABEL_RADIUS_MM * LABEL_RADIUS_MM => labels[j],
-                _ => 0,
-            },
-            Some(template_split),
-            Cloud::Target,
-        )?;
-        if round + 1 < GUIDED_ROUNDS {
-            // The fitting frame of the next round: the rigid part of the skeleton pairing
-            // (exact for a rigidly moved copy, unlike the ICP pose of surface samples).
-            pose = kabsch::fit(&skeleton, template_skeleton)?;
-            let map = LocalRigid::new(*template_skeleton, skeleton, neighbours)?;
-            let mut cache = TransformCache::<64>::new();
-            for (c, p) in carried.iter_mut().zip(&template.som1) {
-                *c = map.map_point(p, &mut cache)?;
-            }
-        }
-    }
-    Ok((pose, skeleton))
+    let mut run = TargetSkeleton::start(target, template, template_labels)?;
+    while !run.step(
+        cloud,
+        target,
+        template,
+        template_labels,
+        template_skeleton,
+        template_split,
+        neighbours,
+        u32::MAX,
+    )? {}
+    run.result().ok_or(Error::RigidFit)
 }

@@ -4,7 +4,7 @@
 use crate::endpoints::{match_endpoints, EndpointMatch};
 use crate::error::{Cloud, Error, Result};
 use crate::geom::{nearest, validate, Frame, Rigid};
-use crate::guided::{fit_ribs, label_nodes, target_skeleton, NodeLabels};
+use crate::guided::{fit_ribs, label_nodes, GuidedStage, NodeLabels, TargetSkeleton};
 use crate::local_rigid::{LocalRigid, NEIGHBOURS};
 use crate::skeleton::{GraphBuild, RibEnds, RibSkeleton, SkeletonGraph, TURN_ANGLE_DEG};
 use crate::som::SomConfig;
@@ -230,13 +230,25 @@ pub fn register(template: &Template, target: &[Vec3], cfg: &Config) -> Result<Re
 }
 
 /// A registration in progress, for callers that must bound the work per call (the
-/// controller's 100 Hz loop): the target's skeleton graph is built at most `budget` SOM
-/// iterations per [`Registering::step`] (a stage change is a call of its own), and the
-/// rib skeleton and mapping take one last call. The result equals [`register`]'s and is
-/// kept inside (nothing of kilobytes passes through the caller's stack).
+/// controller's 100 Hz loop): every [`Registering::step`] does at most `budget` units of
+/// work — a unit is one SOM iteration or one nearest-neighbour scan of a node set (the
+/// dead-unit scans, the guided model's ICP pairings, labels and rib-fit points, see
+/// [`TargetSkeleton`]) or one rigid fit — and a stage change is a call of its own. The
+/// graph model's endpoint matching and the mapping's set-up take one call each. The
+/// result equals [`register`]'s and is kept inside (nothing of kilobytes passes through
+/// the caller's stack).
 pub struct Registering {
-    graph: GraphBuild,
-    result: Option<Registration>,
+    stage: Stage,
+}
+
+// The stages are exclusive and live once per registration: boxing is not an option
+// without a heap, and the size is the largest stage's anyway.
+#[allow(clippy::large_enum_variant)]
+enum Stage {
+    Graph(GraphBuild),
+    Guided(SkeletonGraph, TargetSkeleton),
+    Done(Registration),
+    Failed,
 }
 
 impl Registering {
@@ -244,19 +256,45 @@ impl Registering {
     pub fn start(target: &[Vec3], cfg: &Config) -> Result<Self> {
         validate(target, Cloud::Target, MIN_CLOUD_POINTS, MAX_CLOUD_POINTS)?;
         Ok(Registering {
-            graph: GraphBuild::start(target, Cloud::Target, cfg, false)?,
-            result: None,
+            stage: Stage::Graph(GraphBuild::start(target, Cloud::Target, cfg, false)?),
         })
     }
 
     /// SOM iterations done and in all.
     pub fn progress(&self, cfg: &Config) -> (u32, u32) {
-        self.graph.progress(cfg)
+        match &self.stage {
+            Stage::Graph(g) => g.progress(cfg),
+            _ => {
+                let total = cfg.som1.iterations + cfg.som2.iterations;
+                (total, total)
+            }
+        }
+    }
+
+    /// What the next step works on: `"som"` (skeleton graph), then for the guided model
+    /// `"coarse"`, `"refine"`, `"label"`, `"fit"`, `"solve"`, `"refit"`, `"carry"`, and
+    /// `"done"` (or `"failed"`). For cost reports.
+    pub fn stage(&self) -> &'static str {
+        match &self.stage {
+            Stage::Graph(_) => "som",
+            Stage::Guided(_, t) => match t.stage() {
+                GuidedStage::Coarse => "coarse",
+                GuidedStage::Refine => "refine",
+                GuidedStage::Label(_) => "label",
+                GuidedStage::Fit(_) => "fit",
+                GuidedStage::Solve(_) => "solve",
+                GuidedStage::Refit(_) => "refit",
+                GuidedStage::Carry(_) => "carry",
+                GuidedStage::Done => "map",
+            },
+            Stage::Done(_) => "done",
+            Stage::Failed => "failed",
+        }
     }
 
     /// One bounded step; `true` when the registration is done
-    /// ([`Registering::registration`]). `target` and `cfg` must be those given to
-    /// [`Registering::start`].
+    /// ([`Registering::registration`]). `template`, `target` and `cfg` must be those of
+    /// every call.
     #[inline(never)]
     pub fn step(
         &mut self,
@@ -265,74 +303,136 @@ impl Registering {
         cfg: &Config,
         budget: u32,
     ) -> Result<bool> {
-        if self.result.is_some() {
-            return Ok(true);
+        let outcome = self.advance(template, target, cfg, budget);
+        if outcome.is_err() {
+            self.stage = Stage::Failed;
         }
-        if !self.graph.step(target, cfg, budget)? {
+        outcome
+    }
+
+    // Each stage change is a function of its own (`inline(never)`): their large locals
+    // (graph, guided state, registration: 7–16 KiB each) then never share one frame,
+    // which overflowed the controller's stack.
+    fn advance(
+        &mut self,
+        template: &Template,
+        target: &[Vec3],
+        cfg: &Config,
+        budget: u32,
+    ) -> Result<bool> {
+        match &mut self.stage {
+            Stage::Graph(build) => {
+                if !build.step(target, cfg, budget)? {
+                    return Ok(false);
+                }
+                self.graph_done(template, cfg)
+            }
+            Stage::Guided(graph, run) => {
+                if !run.step(
+                    target,
+                    graph,
+                    &template.graph,
+                    &template.node_labels,
+                    &template.skeleton.points,
+                    &template.midline_fraction,
+                    cfg.neighbours,
+                    budget,
+                )? {
+                    return Ok(false);
+                }
+                self.guided_done(template, cfg)?;
+                Ok(true)
+            }
+            Stage::Done(_) => Ok(true),
+            Stage::Failed => Err(Error::Config("the registration failed before")),
+        }
+    }
+
+    /// The skeleton graph is built: the guided stage starts, or (graph model) the
+    /// endpoint matching and mapping finish the registration.
+    #[inline(never)]
+    fn graph_done(&mut self, template: &Template, cfg: &Config) -> Result<bool> {
+        let Stage::Graph(build) = &mut self.stage else {
+            return Err(Error::Config("the skeleton graph build did not finish"));
+        };
+        let graph = build
+            .take_graph()
+            .ok_or(Error::Config("the skeleton graph build did not finish"))?;
+        if let (RibModel::Guided, None) = (cfg.rib_model, &template.ends) {
+            let run = TargetSkeleton::start(&graph, &template.graph, &template.node_labels)?;
+            self.stage = Stage::Guided(graph, run);
             return Ok(false);
         }
-        let graph = self
-            .graph
-            .graph()
-            .ok_or(Error::Config("the skeleton graph build did not finish"))?;
-        self.result = Some(finish(template, target, graph, cfg)?);
+        let (pose, matching, skeleton) = graph_skeleton(template, &graph, cfg)?;
+        self.stage = Stage::Done(finish(template, graph, pose, matching, skeleton, cfg)?);
         Ok(true)
+    }
+
+    /// The guided target skeleton is done: the mapping finishes the registration.
+    #[inline(never)]
+    fn guided_done(&mut self, template: &Template, cfg: &Config) -> Result<()> {
+        let Stage::Guided(graph, run) = &mut self.stage else {
+            return Err(Error::Config("the guided rib model did not finish"));
+        };
+        let (pose, points) = run.result().ok_or(Error::RigidFit)?;
+        let skeleton = RibSkeleton {
+            points,
+            paths: Default::default(),
+            degree: [3; 4],
+        };
+        let graph = core::mem::replace(graph, SkeletonGraph::empty());
+        self.stage = Stage::Done(finish(template, graph, pose, None, skeleton, cfg)?);
+        Ok(())
     }
 
     /// The registration, once done.
     pub fn registration(&self) -> Option<&Registration> {
-        self.result.as_ref()
+        match &self.stage {
+            Stage::Done(r) => Some(r),
+            _ => None,
+        }
     }
 
     /// The registration, once done.
     pub fn into_registration(self) -> Option<Registration> {
-        self.result
+        match self.stage {
+            Stage::Done(r) => Some(r),
+            _ => None,
+        }
     }
 }
 
-/// The rib skeleton of the target (endpoint matching or guided) and the mapping.
+/// The graph model's target skeleton: endpoint matching and tree paths.
 #[inline(never)]
-fn finish(
+fn graph_skeleton(
     template: &Template,
-    target: &[Vec3],
     graph: &SkeletonGraph,
     cfg: &Config,
-) -> Result<Registration> {
-    let (pose, matching, skeleton) = match (cfg.rib_model, &template.ends) {
+) -> Result<(Rigid, Option<EndpointMatch>, RibSkeleton)> {
+    match (cfg.rib_model, &template.ends) {
         (RibModel::Graph, Some(ends)) => {
             let matching = match_endpoints(graph, &template.graph, ends)?;
             let skeleton = RibSkeleton::build(graph, &matching.ends, cfg, Cloud::Target)?;
-            (matching.pose, Some(matching), skeleton)
+            Ok((matching.pose, Some(matching), skeleton))
         }
-        (RibModel::Guided, None) => {
-            let (pose, points) = target_skeleton(
-                target,
-                graph,
-                &template.graph,
-                &template.node_labels,
-                &template.skeleton.points,
-                &template.midline_fraction,
-                cfg.neighbours,
-            )?;
-            (
-                pose,
-                None,
-                RibSkeleton {
-                    points,
-                    paths: Default::default(),
-                    degree: [3; 4],
-                },
-            )
-        }
-        _ => {
-            return Err(Error::Config(
-                "template and registration use different rib models",
-            ))
-        }
-    };
+        _ => Err(Error::Config(
+            "template and registration use different rib models",
+        )),
+    }
+}
+
+/// The mapping template → target from the paired skeletons.
+fn finish(
+    template: &Template,
+    graph: SkeletonGraph,
+    pose: Rigid,
+    matching: Option<EndpointMatch>,
+    skeleton: RibSkeleton,
+    cfg: &Config,
+) -> Result<Registration> {
     let map = LocalRigid::new(template.skeleton.points, skeleton.points, cfg.neighbours)?;
     Ok(Registration {
-        graph: graph.clone(),
+        graph,
         pose,
         matching,
         skeleton,

@@ -38,7 +38,7 @@ use crate::geom::{Frame, Rigid};
 use crate::hull::{gift_wrap, Vec2};
 use crate::mst::Tree;
 use crate::pipeline::Config;
-use crate::som::{Som, SomTrainer};
+use crate::som::{LiveScan, Som, SomTrainer};
 use crate::Vec3;
 
 /// Capacity of SOM 1 (paper grid: 20 × 20 = 400 nodes; 400 × 12 B = 4.7 KiB).
@@ -82,6 +82,23 @@ pub struct SkeletonGraph {
 }
 
 impl SkeletonGraph {
+    /// A graph of nothing (a placeholder for one moved out).
+    pub fn empty() -> Self {
+        SkeletonGraph {
+            som1: heapless::Vec::new(),
+            key_points: heapless::Vec::new(),
+            tree: Tree::default(),
+            frame: Frame {
+                origin: Vec3::zeros(),
+                axes: nalgebra::Matrix3::identity(),
+                spread: Vec3::zeros(),
+            },
+            hull: heapless::Vec::new(),
+            midline: 0.0,
+            endpoints: Err(Error::Config("an empty graph has no endpoints")),
+        }
+    }
+
     /// SOM 1 → SOM 2 → MST → hull → endpoints for `cloud`. With `patient_frame` the
     /// cloud is taken to be in the patient frame (x lateral, y cranial) and the axes are
     /// oriented to it (used for the template); otherwise their signs are arbitrary.
@@ -156,11 +173,12 @@ pub struct GraphBuild {
 // option without a heap, and the size is the largest stage's anyway.
 #[allow(clippy::large_enum_variant)]
 enum GraphStage {
-    Som1(Som<SOM1_CAPACITY>, SomTrainer),
+    Som1(Som<SOM1_CAPACITY>, SomTrainer, LiveScan<SOM1_CAPACITY>),
     Som2(
         heapless::Vec<Vec3, SOM1_CAPACITY>,
         Som<KEY_POINTS>,
         SomTrainer,
+        LiveScan<KEY_POINTS>,
     ),
     Done(SkeletonGraph),
     Failed,
@@ -184,7 +202,7 @@ impl GraphBuild {
         Ok(GraphBuild {
             which,
             patient_frame,
-            stage: GraphStage::Som1(map, trainer),
+            stage: GraphStage::Som1(map, trainer, LiveScan::new(cfg.som1.seed)),
         })
     }
 
@@ -192,8 +210,8 @@ impl GraphBuild {
     pub fn progress(&self, cfg: &Config) -> (u32, u32) {
         let total = cfg.som1.iterations + cfg.som2.iterations;
         match &self.stage {
-            GraphStage::Som1(_, t) => (t.done(), total),
-            GraphStage::Som2(_, _, t) => (cfg.som1.iterations + t.done(), total),
+            GraphStage::Som1(_, t, _) => (t.done(), total),
+            GraphStage::Som2(_, _, t, _) => (cfg.som1.iterations + t.done(), total),
             GraphStage::Done(_) | GraphStage::Failed => (total, total),
         }
     }
@@ -205,28 +223,38 @@ impl GraphBuild {
     /// kilobytes passes through the caller's stack (the controller's 100 Hz loop).
     #[inline(never)]
     pub fn step(&mut self, cloud: &[Vec3], cfg: &Config, budget: u32) -> Result<bool> {
-        let (som1, som2) = (&cfg.som1, &cfg.som2);
+        let som2 = &cfg.som2;
         match &mut self.stage {
-            GraphStage::Som1(map, trainer) => {
-                if !trainer.run(map, cloud, budget) {
+            GraphStage::Som1(map, trainer, scan) => {
+                if !trainer.finished() {
+                    trainer.run(map, cloud, budget);
+                    return Ok(false);
+                }
+                // The dead-unit scan: one map scan per point, as a SOM iteration.
+                if !scan.step(map, cloud, budget) {
                     return Ok(false);
                 }
                 let mut live1 = heapless::Vec::new();
-                map.live_nodes(cloud, som1.seed, &mut live1)?;
+                scan.finish(map, &mut live1)?;
                 let frame1 = Frame::principal(&live1, som2.seed).ok_or(Error::Degenerate {
                     cloud: self.which,
                     spread_mm: 0.0,
                 })?;
                 let (map2, trainer2) = Som::<KEY_POINTS>::start(&live1, &frame1, som2)?;
-                self.stage = GraphStage::Som2(live1, map2, trainer2);
+                self.stage = GraphStage::Som2(live1, map2, trainer2, LiveScan::new(som2.seed));
                 Ok(false)
             }
-            GraphStage::Som2(live1, map, trainer) => {
-                if !trainer.run(map, live1, budget) {
+            GraphStage::Som2(live1, map, trainer, scan) => {
+                if !trainer.finished() {
+                    trainer.run(map, live1, budget);
+                    return Ok(false);
+                }
+                // A scan of the 40-node map costs a tenth of a SOM-1 one.
+                if !scan.step(map, live1, budget.saturating_mul(8)) {
                     return Ok(false);
                 }
                 let mut key_points = heapless::Vec::new();
-                map.live_nodes(live1, som2.seed, &mut key_points)?;
+                scan.finish(map, &mut key_points)?;
                 let live1 = core::mem::take(live1);
                 self.stage = GraphStage::Failed;
                 let graph = SkeletonGraph::from_key_points(
@@ -248,6 +276,17 @@ impl GraphBuild {
         match &self.stage {
             GraphStage::Done(g) => Some(g),
             _ => None,
+        }
+    }
+
+    /// The graph, once built, moved out (the build is left failed).
+    pub fn take_graph(&mut self) -> Option<SkeletonGraph> {
+        match core::mem::replace(&mut self.stage, GraphStage::Failed) {
+            GraphStage::Done(g) => Some(g),
+            other => {
+                self.stage = other;
+                None
+            }
         }
     }
 

@@ -187,31 +187,73 @@ impl<const CAP: usize> Som<CAP> {
         seed: u64,
         out: &mut heapless::Vec<Vec3, M>,
     ) -> Result<()> {
-        out.clear();
-        let mut hit = [false; CAP];
+        let mut scan = LiveScan::<CAP>::new(seed);
+        while !scan.step(self, points, u32::MAX) {}
+        scan.finish(self, out)
+    }
+
+    /// All nodes, row after row.
+    pub fn nodes(&self) -> &[Vec3] {
+        &self.nodes
+    }
+}
+
+/// [`Som::live_nodes`] in bounded steps: [`LiveScan::step`] finds the best matching
+/// unit of at most `budget` points per call (one scan of the map each).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LiveScan<const CAP: usize> {
+    hit: [bool; CAP],
+    rng: Rng,
+    next: u32,
+}
+
+impl<const CAP: usize> LiveScan<CAP> {
+    /// Before the first point; `seed` draws the sample of a cloud above [`LIVE_SAMPLES`].
+    pub fn new(seed: u64) -> Self {
+        LiveScan {
+            hit: [false; CAP],
+            rng: Rng::new(seed),
+            next: 0,
+        }
+    }
+
+    /// At most `budget` more points; `true` when all are seen. `som` and `points` must be
+    /// the same at every call.
+    pub fn step(&mut self, som: &Som<CAP>, points: &[Vec3], budget: u32) -> bool {
         let n = points.len();
-        let mut rng = Rng::new(seed);
-        for k in 0..n.min(LIVE_SAMPLES) {
+        let total = n.min(LIVE_SAMPLES);
+        let start = self.next as usize;
+        let end = start.saturating_add(budget as usize).min(total);
+        for k in start..end {
             let p = if n <= LIVE_SAMPLES {
                 points[k]
             } else {
-                points[rng.below(crate::geom::sat_u32(n)) as usize]
+                points[self.rng.below(crate::geom::sat_u32(n)) as usize]
             };
-            let (r, c) = self.bmu(&p);
-            hit[r * self.cols + c] = true;
+            let (r, c) = som.bmu(&p);
+            if let Some(h) = self.hit.get_mut(r * som.cols + c) {
+                *h = true;
+            }
         }
-        for (w, &h) in self.nodes.iter().zip(&hit) {
+        // Note: end <= LIVE_SAMPLES = 2048.
+        self.next = end as u32;
+        end >= total
+    }
+
+    /// The live nodes, row after row, into `out`.
+    pub fn finish<const M: usize>(
+        &self,
+        som: &Som<CAP>,
+        out: &mut heapless::Vec<Vec3, M>,
+    ) -> Result<()> {
+        out.clear();
+        for (w, &h) in som.nodes.iter().zip(&self.hit) {
             if h {
                 out.push(*w)
                     .map_err(|_| Error::Capacity { capacity: M as u32 })?;
             }
         }
         Ok(())
-    }
-
-    /// All nodes, row after row.
-    pub fn nodes(&self) -> &[Vec3] {
-        &self.nodes
     }
 }
 

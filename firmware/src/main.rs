@@ -114,6 +114,7 @@ mod app {
         let mut out = [0u8; wire::MAX_FRAME];
         let mut cost = CostW::default();
         let mut reg_started = false;
+        let mut stages = cost::StageCosts::new();
         let mut turns: u32 = 0;
         loop {
             let turn = Cost::start();
@@ -126,6 +127,7 @@ mod app {
                 }
                 if let Some(frame) = rx.push(byte[0]) {
                     if matches!(&frame, Ok(f) if **f == crate::QUIT[..]) {
+                        stages.log();
                         quit(&mut uart, boot, &cal, &cost);
                     }
                     let call = Cost::start();
@@ -141,9 +143,13 @@ mod app {
                 cost.registration_calls = 0;
                 reg_started = true;
             }
+            let stage = controller.registration_stage();
             let step = Cost::start();
             controller.poll(now_us());
             let n = step.elapsed_instructions();
+            if let Some(stage) = stage {
+                stages.add(stage, n);
+            }
             if registering {
                 cost.registration_instructions += n;
                 cost.registration_calls += 1;
