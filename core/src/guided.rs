@@ -244,7 +244,7 @@ pub enum GuidedStage {
 /// [`SOM1_CAPACITY`] distances, about as much as one SOM iteration) with what goes with
 /// it, or one rigid fit; a stage change is a call of its own. The state lives here (about
 /// 10 KiB: the carried nodes, labels, the mapping's transform cache), not on the stack.
-/// [`target_skeleton`] runs it to the end.
+/// [`crate::pipeline::register`] runs it to the end.
 pub struct TargetSkeleton {
     stage: GuidedStage,
     cursor: u32,
@@ -443,30 +443,4 @@ impl TargetSkeleton {
         self.stage = stage;
         self.cursor = 0;
     }
-}
-
-/// Target skeleton paired with `template_skeleton`, guided by the template's labelled
-/// nodes: [`TargetSkeleton`] run to the end. Returns the rigid pose target → template
-/// and the 30 target points.
-pub fn target_skeleton(
-    cloud: &[Vec3],
-    target: &SkeletonGraph,
-    template: &SkeletonGraph,
-    template_labels: &[u8],
-    template_skeleton: &[Vec3; SKELETON_POINTS],
-    template_split: &[f32; 4],
-    neighbours: usize,
-) -> Result<(Rigid, [Vec3; SKELETON_POINTS])> {
-    let mut run = TargetSkeleton::start(target, template, template_labels)?;
-    while !run.step(
-        cloud,
-        target,
-        template,
-        template_labels,
-        template_skeleton,
-        template_split,
-        neighbours,
-        u32::MAX,
-    )? {}
-    run.result().ok_or(Error::RigidFit)
 }
