@@ -593,9 +593,11 @@ impl<const VOXELS: usize> Controller<VOXELS> {
         if self.registering.is_none() {
             // First the voxel centroids, then the registration's set-up, each in calls of
             // their own.
-            if self.sweep.cloud.finish_some(VOXELS_FINISHED_PER_POLL) {
+            if self.sweep.cloud.finish_some(0) {
                 self.targets.clear();
                 self.start_registration(&cfg);
+            } else {
+                self.sweep.cloud.finish_some(VOXELS_FINISHED_PER_POLL);
             }
             return;
         }

@@ -17,8 +17,9 @@
 //!    with.
 
 use crate::error::Result;
-use crate::geom::{nearest, Frame, Rigid};
+use crate::geom::{Frame, Rigid};
 use crate::kabsch::{self, PairSums};
+use crate::kdtree::KdTree;
 use crate::skeleton::{RibEnds, SkeletonGraph};
 use crate::Vec3;
 use nalgebra::Matrix3;
@@ -90,8 +91,9 @@ pub fn match_endpoints(
 /// Rigid pose taking `src` onto `dst` from five starts (see the module docs), whatever
 /// their relative pose; `fs`, `fd` are their principal axes. Returns the pose and RMS.
 pub fn coarse_pose(src: &[Vec3], fs: &Frame, dst: &[Vec3], fd: &Frame) -> Result<(Rigid, f32)> {
+    let tree = IcpTree::build(dst)?;
     let mut run = CoarsePose::new(fs, fd);
-    while !run.step(src, fs, dst, fd, u32::MAX)? {}
+    while !run.step(src, fs, dst, &tree, fd, u32::MAX)? {}
     // Note: `step` returns `true` only after the fifth start, which sets the result.
     run.result().ok_or(crate::error::Error::RigidFit)
 }
@@ -143,19 +145,20 @@ impl CoarsePose {
 
     /// One bounded step of the current start's ICP ([`COARSE_ITERATIONS`] iterations);
     /// `true` when all starts are done ([`CoarsePose::result`]). The arguments must be
-    /// the same at every call.
+    /// the same at every call (`tree` built over `dst`).
     pub fn step(
         &mut self,
         src: &[Vec3],
         fs: &Frame,
         dst: &[Vec3],
+        tree: &IcpTree,
         fd: &Frame,
         budget: u32,
     ) -> Result<bool> {
         if self.start >= Self::STARTS {
             return Ok(true);
         }
-        if !self.icp.step(src, dst, COARSE_ITERATIONS, budget)? {
+        if !self.icp.step(src, dst, tree, COARSE_ITERATIONS, budget)? {
             return Ok(false);
         }
         let (pose, rms) = (self.icp.pose(), self.icp.rms());
@@ -175,20 +178,24 @@ impl CoarsePose {
     }
 }
 
-/// Largest source set of [`icp`] (a SOM-1 node set).
+/// Largest source and destination set of [`icp`] (a SOM-1 node set).
 pub const ICP_CAPACITY: usize = crate::skeleton::SOM1_CAPACITY;
+
+/// The nearest-point index of an ICP's destination set.
+pub type IcpTree = KdTree<ICP_CAPACITY>;
 
 /// Point-to-point ICP of `src` (at most [`ICP_CAPACITY`] points) onto `dst` from `pose`,
 /// `iterations` rounds; returns the pose and the RMS of the last pairing.
 pub fn icp(src: &[Vec3], dst: &[Vec3], pose: Rigid, iterations: usize) -> Result<(Rigid, f32)> {
+    let tree = IcpTree::build(dst)?;
     let mut run = Icp::new(pose);
-    while !run.step(src, dst, iterations, u32::MAX)? {}
+    while !run.step(src, dst, &tree, iterations, u32::MAX)? {}
     Ok((run.pose(), run.rms()))
 }
 
 /// An [`icp`] in progress, for callers that bound the work per call: each
 /// [`Icp::step`] pairs at most `budget` source points with their nearest destination
-/// point (one scan of `dst` each), accumulating [`PairSums`]; the fit that ends an
+/// point (a query of the destination's [`IcpTree`] each), accumulating [`PairSums`]; the fit that ends an
 /// iteration is a call of its own. Nothing is buffered.
 ///
 /// An iteration whose pairing equals the previous one ends the ICP early: the fit of an
@@ -236,12 +243,13 @@ impl Icp {
         self.rms
     }
 
-    /// One bounded step; `true` once `iterations` are done. `src`, `dst` and
+    /// One bounded step; `true` once `iterations` are done. `src`, `dst`, its `tree` and
     /// `iterations` must be the same at every call.
     pub fn step(
         &mut self,
         src: &[Vec3],
         dst: &[Vec3],
+        tree: &IcpTree,
         iterations: usize,
         budget: u32,
     ) -> Result<bool> {
@@ -258,7 +266,9 @@ impl Icp {
             let end = cursor.saturating_add(budget as usize).min(src.len());
             for p in &src[cursor..end] {
                 let m = self.pose.apply(p);
-                let (j, d2) = nearest(dst, &m).ok_or(crate::error::Error::RigidFit)?;
+                let (j, d2) = tree
+                    .nearest(dst, &m, f32::INFINITY)
+                    .ok_or(crate::error::Error::RigidFit)?;
                 self.sums.add(p, &dst[j]);
                 self.sum_d2 += d2;
                 for byte in (j as u32).to_le_bytes() {
@@ -355,8 +365,9 @@ mod tests {
         }
         assert_eq!((fast, fast_rms), (slow, slow_rms));
         let mut run = Icp::new(Rigid::identity());
+        let tree = IcpTree::build(&dst).unwrap();
         let mut calls = 0;
-        while !run.step(&src, &dst, 30, 7).unwrap() {
+        while !run.step(&src, &dst, &tree, 30, 7).unwrap() {
             calls += 1;
         }
         assert_eq!((run.pose(), run.rms()), (fast, fast_rms));

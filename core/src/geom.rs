@@ -58,6 +58,17 @@ pub struct Frame {
     pub spread: Vec3,
 }
 
+impl Frame {
+    /// The coordinate axes at the origin, no spread (a placeholder before a real frame).
+    pub fn identity() -> Self {
+        Frame {
+            origin: Vec3::zeros(),
+            axes: Matrix3::identity(),
+            spread: Vec3::zeros(),
+        }
+    }
+}
+
 /// At most this many points enter a principal-axes estimate; larger clouds are estimated
 /// from a seeded sample of this size (the axes only steer initialisation and orientation).
 pub const PCA_SAMPLE: usize = 2048;

@@ -29,11 +29,12 @@
 //!    template nodes more closely onto the target than a rigid pose can, and their
 //!    Kabsch fit giving the next round's fitting frame.
 
-use crate::endpoints::{CoarsePose, Icp};
+use crate::endpoints::{CoarsePose, Icp, IcpTree};
 use crate::error::{Cloud, Error, Result};
 use crate::fit::{equal_steps, PolyFit};
-use crate::geom::{nearest, Rigid};
+use crate::geom::{Frame, Rigid};
 use crate::kabsch;
+use crate::kdtree::KdTree;
 use crate::local_rigid::{LocalRigid, TransformCache};
 use crate::skeleton::{SkeletonGraph, RIBS, RIB_SAMPLES, SKELETON_POINTS, SOM1_CAPACITY};
 use crate::Vec3;
@@ -220,6 +221,8 @@ impl RibFits {
 /// Where a [`TargetSkeleton`] is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum GuidedStage {
+    /// The k-d trees of the template's and the target's SOM-1 nodes are built.
+    Index,
     /// Five-start key-point ICP ([`CoarsePose`]).
     Coarse,
     /// ICP of all SOM-1 nodes from the coarse pose.
@@ -240,14 +243,20 @@ pub enum GuidedStage {
 
 /// Template-guided target skeleton (the module's steps 1–4) in bounded steps, for the
 /// controller's 100 Hz loop: every [`TargetSkeleton::step`] does at most `budget` units
-/// of work, a unit being one nearest-neighbour scan of a node set (at most
-/// [`SOM1_CAPACITY`] distances, about as much as one SOM iteration) with what goes with
-/// it, or one rigid fit; a stage change is a call of its own. The state lives here (about
-/// 10 KiB: the carried nodes, labels, the mapping's transform cache), not on the stack.
-/// [`crate::pipeline::register`] runs it to the end.
+/// of work, a unit being about one scan of a node set ([`SOM1_CAPACITY`] distances, about
+/// as much as one SOM iteration): [`QUERIES_PER_UNIT`] nearest-node queries of a k-d tree
+/// ([`crate::kdtree`]) with what goes with them, [`SPLITS_PER_UNIT`] points partitioned
+/// while building a tree, or one rigid fit; a stage change is a call of its own. The
+/// state lives here (about 13 KiB: the carried nodes, labels, three node trees, the
+/// mapping's transform cache), not on the stack. [`crate::pipeline::register`] runs it to
+/// the end.
 pub struct TargetSkeleton {
     stage: GuidedStage,
     cursor: u32,
+    /// Trees of the template's SOM-1 nodes, the target's, and the carried template nodes.
+    template_tree: IcpTree,
+    target_tree: NodeTree,
+    carried_tree: NodeTree,
     coarse: CoarsePose,
     icp: Icp,
     pose: Rigid,
@@ -259,28 +268,42 @@ pub struct TargetSkeleton {
     cache: TransformCache<CARRY_CACHE>,
 }
 
+impl Default for TargetSkeleton {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// A k-d tree over a SOM-1 node set.
+pub type NodeTree = KdTree<SOM1_CAPACITY>;
+
+/// Nearest-node queries of a k-d tree per unit of [`TargetSkeleton::step`]'s budget: a
+/// query of a 400-node tree visits a few leaves, about an eighth of a full scan (set from
+/// the emulated controller's per-stage instruction counts).
+pub const QUERIES_PER_UNIT: usize = 8;
+/// Points partitioned while building a tree per unit of budget (a median selection of `m`
+/// points takes a few `m` comparisons, a scan of `m` nodes takes `m` distances).
+pub const SPLITS_PER_UNIT: usize = 48;
+/// Cloud points labelled and added to the rib fits per unit of budget (their `f64`
+/// power sums are soft-float on the Cortex-M4F: ~4,000 instructions a point).
+pub const FIT_POINTS_PER_UNIT: usize = 3;
+
 /// Transform cache of the carried-node mapping: 64 entries × ~60 B ≈ 3.8 KiB. A full
 /// cache only refits (see [`TransformCache`]); with 16 entries the carry refitted at
 /// almost every node and cost 76 M instructions on the emulated controller.
 pub const CARRY_CACHE: usize = 64;
 
 impl TargetSkeleton {
-    /// Before the coarse pose of `target` (its key points and frame) onto `template`'s
-    /// SOM-1 nodes; `template_labels` must label those nodes.
-    pub fn start(
-        target: &SkeletonGraph,
-        template: &SkeletonGraph,
-        template_labels: &[u8],
-    ) -> Result<Self> {
-        if template_labels.len() != template.som1.len() {
-            return Err(Error::Config(
-                "the guided rib model needs a labelled template",
-            ));
-        }
-        Ok(TargetSkeleton {
-            stage: GuidedStage::Coarse,
+    /// A run over no graphs yet: [`TargetSkeleton::start`] starts it (stepping it
+    /// before is an error). Separate so that the controller builds it in place.
+    pub fn new() -> Self {
+        TargetSkeleton {
+            stage: GuidedStage::Index,
             cursor: 0,
-            coarse: CoarsePose::new(&target.frame, &template.frame),
+            template_tree: IcpTree::new(),
+            target_tree: NodeTree::new(),
+            carried_tree: NodeTree::new(),
+            coarse: CoarsePose::new(&Frame::identity(), &Frame::identity()),
             icp: Icp::new(Rigid::identity()),
             pose: Rigid::identity(),
             carried: heapless::Vec::new(),
@@ -289,7 +312,34 @@ impl TargetSkeleton {
             skeleton: [Vec3::zeros(); SKELETON_POINTS],
             map: None,
             cache: TransformCache::new(),
-        })
+        }
+    }
+
+    /// (Re)starts the run before the coarse pose of `target` (its key points and frame)
+    /// onto `template`'s SOM-1 nodes; `template_labels` must label those nodes. Works in
+    /// place: nothing of the run's size passes through the stack.
+    pub fn start(
+        &mut self,
+        target: &SkeletonGraph,
+        template: &SkeletonGraph,
+        template_labels: &[u8],
+    ) -> Result<()> {
+        if template_labels.len() != template.som1.len() {
+            return Err(Error::Config(
+                "the guided rib model needs a labelled template",
+            ));
+        }
+        self.template_tree.start(template.som1.len())?;
+        self.target_tree.start(target.som1.len())?;
+        self.carried_tree.start(0)?;
+        self.coarse = CoarsePose::new(&target.frame, &template.frame);
+        self.icp = Icp::new(Rigid::identity());
+        self.pose = Rigid::identity();
+        self.carried.clear();
+        self.ribs = None;
+        self.map = None;
+        self.cache = TransformCache::new();
+        self.begin(GuidedStage::Index)
     }
 
     /// The current stage.
@@ -321,16 +371,26 @@ impl TargetSkeleton {
         budget: u32,
     ) -> Result<bool> {
         let budget = budget.max(1) as usize;
+        let queries = budget.saturating_mul(QUERIES_PER_UNIT);
+        let splits = budget.saturating_mul(SPLITS_PER_UNIT);
         let cursor = self.cursor as usize;
         let last_round = GUIDED_ROUNDS as u8 - 1;
         match self.stage {
+            GuidedStage::Index => {
+                if self.template_tree.build_some(&template.som1, splits)?
+                    && self.target_tree.build_some(&target.som1, splits)?
+                {
+                    self.stage = GuidedStage::Coarse;
+                }
+            }
             GuidedStage::Coarse => {
                 if self.coarse.step(
                     &target.key_points,
                     &target.frame,
                     &template.som1,
+                    &self.template_tree,
                     &template.frame,
-                    budget as u32,
+                    queries as u32,
                 )? {
                     let (coarse, _) = self.coarse.result().ok_or(Error::RigidFit)?;
                     self.icp = Icp::new(coarse);
@@ -341,8 +401,9 @@ impl TargetSkeleton {
                 if self.icp.step(
                     &target.som1,
                     &template.som1,
+                    &self.template_tree,
                     REFINE_ITERATIONS,
-                    budget as u32,
+                    queries as u32,
                 )? {
                     self.pose = self.icp.pose();
                     let inverse = self.pose.inverse();
@@ -351,17 +412,19 @@ impl TargetSkeleton {
                         // Note: as many as the template's nodes, at most the capacity.
                         let _ = self.carried.push(inverse.apply(p));
                     }
-                    self.begin(GuidedStage::Label(0));
+                    self.begin(GuidedStage::Label(0))?;
                 }
             }
             GuidedStage::Label(round) => {
-                let end = cursor.saturating_add(budget).min(target.som1.len());
+                if !self.carried_tree.build_some(&self.carried, splits)? {
+                    return Ok(false);
+                }
+                let end = cursor.saturating_add(queries).min(target.som1.len());
                 for p in &target.som1[cursor.min(end)..end] {
-                    let label = match nearest(&self.carried, p) {
-                        Some((j, d2)) if d2 <= LABEL_RADIUS_MM * LABEL_RADIUS_MM => {
-                            template_labels.get(j).copied().unwrap_or(0)
-                        }
-                        _ => 0,
+                    let r2 = LABEL_RADIUS_MM * LABEL_RADIUS_MM;
+                    let label = match self.carried_tree.nearest(&self.carried, p, r2) {
+                        Some((j, _)) => template_labels.get(j).copied().unwrap_or(0),
+                        None => 0,
                     };
                     // Note: one label per node, and there are at most SOM1_CAPACITY nodes.
                     let _ = self.labels.push(label);
@@ -369,20 +432,19 @@ impl TargetSkeleton {
                 self.cursor = end as u32;
                 if end >= target.som1.len() {
                     self.ribs = Some(RibFits::new(&target.som1, &self.labels, &self.pose)?);
-                    self.begin(GuidedStage::Fit(round));
+                    self.begin(GuidedStage::Fit(round))?;
                 }
             }
             GuidedStage::Fit(round) => {
                 let stride = fit_stride(cloud.len());
                 let ribs = self.ribs.as_mut().ok_or(Error::RigidFit)?;
                 let mut i = cursor;
-                for _ in 0..budget {
+                for _ in 0..budget.saturating_mul(FIT_POINTS_PER_UNIT) {
                     let Some(p) = cloud.get(i) else { break };
-                    let label = match nearest(&target.som1, p) {
-                        Some((j, d2)) if d2 <= LABEL_RADIUS_MM * LABEL_RADIUS_MM => {
-                            self.labels.get(j).copied().unwrap_or(0)
-                        }
-                        _ => 0,
+                    let r2 = LABEL_RADIUS_MM * LABEL_RADIUS_MM;
+                    let label = match self.target_tree.nearest(&target.som1, p, r2) {
+                        Some((j, _)) => self.labels.get(j).copied().unwrap_or(0),
+                        None => 0,
                     };
                     ribs.add(label, p);
                     i = i.saturating_add(stride);
@@ -412,23 +474,26 @@ impl TargetSkeleton {
                     neighbours,
                 )?);
                 self.cache = TransformCache::new();
-                self.begin(GuidedStage::Carry(round));
+                self.begin(GuidedStage::Carry(round))?;
             }
             GuidedStage::Carry(round) => {
                 let map = self.map.as_ref().ok_or(Error::RigidFit)?;
                 let n = self.carried.len().min(template.som1.len());
                 let (mut i, mut done) = (cursor, 0);
-                // `budget` nodes, but at most one new neighbourhood fit per call.
-                let fits = self.cache.fits;
-                while i < n && done < budget && self.cache.fits == fits {
-                    self.carried[i] = map.map_point(&template.som1[i], &mut self.cache)?;
+                // `queries` nodes, but a node needing a new fit (a unit of its own)
+                // comes first in its call.
+                while i < n && done < queries {
+                    let p = &template.som1[i];
+                    if done > 0 && !self.cache.contains(map.neighbourhood(p)) {
+                        break;
+                    }
+                    self.carried[i] = map.map_point(p, &mut self.cache)?;
                     i += 1;
                     done += 1;
                 }
                 self.cursor = i as u32;
                 if i >= n {
-                    self.labels.clear();
-                    self.begin(GuidedStage::Label(round + 1));
+                    self.begin(GuidedStage::Label(round + 1))?;
                 }
             }
             GuidedStage::Done => return Ok(true),
@@ -436,11 +501,13 @@ impl TargetSkeleton {
         Ok(false)
     }
 
-    fn begin(&mut self, stage: GuidedStage) {
+    fn begin(&mut self, stage: GuidedStage) -> Result<()> {
         if matches!(stage, GuidedStage::Label(_)) {
             self.labels.clear();
+            self.carried_tree.start(self.carried.len())?;
         }
         self.stage = stage;
         self.cursor = 0;
+        Ok(())
     }
 }

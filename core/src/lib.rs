@@ -56,6 +56,7 @@ pub mod geom;
 pub mod guided;
 pub mod hull;
 pub mod kabsch;
+pub mod kdtree;
 pub mod local_rigid;
 pub mod metrics;
 pub mod mst;

@@ -271,13 +271,15 @@ impl Registering {
         }
     }
 
-    /// What the next step works on: `"som"` (skeleton graph), then for the guided model
-    /// `"coarse"`, `"refine"`, `"label"`, `"fit"`, `"solve"`, `"refit"`, `"carry"`, and
+    /// What the next step works on: the skeleton graph's stage ([`GraphBuild::stage`]),
+    /// then for the guided model
+    /// `"index"`, `"coarse"`, `"refine"`, `"label"`, `"fit"`, `"solve"`, `"refit"`, `"carry"`, and
     /// `"done"` (or `"failed"`). For cost reports.
     pub fn stage(&self) -> &'static str {
         match &self.stage {
-            Stage::Graph(_) => "som",
+            Stage::Graph(build) => build.stage(),
             Stage::Guided(_, t) => match t.stage() {
+                GuidedStage::Index => "index",
                 GuidedStage::Coarse => "coarse",
                 GuidedStage::Refine => "refine",
                 GuidedStage::Label(_) => "label",
@@ -359,8 +361,11 @@ impl Registering {
             .take_graph()
             .ok_or(Error::Config("the skeleton graph build did not finish"))?;
         if let (RibModel::Guided, None) = (cfg.rib_model, &template.ends) {
-            let run = TargetSkeleton::start(&graph, &template.graph, &template.node_labels)?;
-            self.stage = Stage::Guided(graph, run);
+            // The run (~13 KiB) is started in place, not built on the stack and moved.
+            self.stage = Stage::Guided(graph, TargetSkeleton::new());
+            if let Stage::Guided(graph, run) = &mut self.stage {
+                run.start(graph, &template.graph, &template.node_labels)?;
+            }
             return Ok(false);
         }
         let (pose, matching, skeleton) = graph_skeleton(template, &graph, cfg)?;

@@ -88,11 +88,7 @@ impl SkeletonGraph {
             som1: heapless::Vec::new(),
             key_points: heapless::Vec::new(),
             tree: Tree::default(),
-            frame: Frame {
-                origin: Vec3::zeros(),
-                axes: nalgebra::Matrix3::identity(),
-                spread: Vec3::zeros(),
-            },
+            frame: Frame::identity(),
             hull: heapless::Vec::new(),
             midline: 0.0,
             endpoints: Err(Error::Config("an empty graph has no endpoints")),
@@ -213,6 +209,18 @@ impl GraphBuild {
             GraphStage::Som1(_, t, _) => (t.done(), total),
             GraphStage::Som2(_, _, t, _) => (cfg.som1.iterations + t.done(), total),
             GraphStage::Done(_) | GraphStage::Failed => (total, total),
+        }
+    }
+
+    /// What the next step works on, for cost reports: `"som1"`, `"scan1"` (SOM-1
+    /// dead units), `"som2"`, `"scan2"` (then the MST, hull and endpoints), `"built"`.
+    pub fn stage(&self) -> &'static str {
+        match &self.stage {
+            GraphStage::Som1(_, t, _) if !t.finished() => "som1",
+            GraphStage::Som1(..) => "scan1",
+            GraphStage::Som2(_, _, t, _) if !t.finished() => "som2",
+            GraphStage::Som2(..) => "scan2",
+            GraphStage::Done(_) | GraphStage::Failed => "built",
         }
     }
 

@@ -256,8 +256,8 @@ pub struct StageCosts {
     len: usize,
 }
 
-/// Distinct stage names kept (the registration has 11; more are counted as the last).
-pub const STAGES: usize = 12;
+/// Distinct stage names kept (the registration has 16; more are counted as the last).
+pub const STAGES: usize = 20;
 
 impl StageCosts {
     /// No calls yet.
@@ -316,11 +316,14 @@ mod tests {
         s.add("fit", 7);
         s.add("som", 30);
         assert_eq!(s.rows(), &[("som", 2, 40, 30), ("fit", 1, 7, 7)]);
-        for k in 0..20 {
-            s.add(
-                ["a", "b", "c", "d", "e", "f", "g", "h", "i", "j", "k", "l"][k % 12],
-                1,
-            );
+        // More names than rows: the last row takes the rest.
+        let names = [
+            "a", "b", "c", "d", "e", "f", "g", "h", "i", "j", "k", "l", "m", "n", "o", "p", "q",
+            "r", "s", "t", "u", "v", "w", "x",
+        ];
+        assert!(names.len() > STAGES);
+        for k in 0..2 * STAGES {
+            s.add(names[k % names.len()], 1);
         }
         assert_eq!(s.rows().len(), STAGES);
     }

@@ -302,7 +302,7 @@ pub fn register_clouds(
             "neighbourhoods": cache.len(),
             "fits": cache.fits,
             "cache_hits": cache.hits,
-            "uncached": cache.uncached,
+            "cache_restarts": cache.restarts,
             "waypoints": mapped_wp.as_ref().map_or(0, Vec::len),
         },
         "timings_ms": {
