@@ -34,6 +34,9 @@ pub const DEFAULT_MAX_COARSENINGS: u8 = 3;
 /// this cloud coarsens once, to 4 mm (about 2,000 voxels). The controller holds fewer,
 /// [`crate::controller::CONTROLLER_VOXELS`] (RAM budget; README).
 pub const VOXEL_CAPACITY: usize = 2048;
+/// [`VoxelCloud::work`] of one inserted point besides the voxels it shifts: its `f64`
+/// voxel arithmetic and binary search cost about 2,500 instructions on the Cortex-M4F.
+pub const INSERT_WORK: u64 = 128;
 /// Default finest voxel edge, mm: below the registration's SOM-1 spacing (~4 mm between
 /// 400 nodes on a cage), above the pixel size and the annotation noise.
 pub const DEFAULT_VOXEL_MM: f32 = 2.0;
@@ -67,6 +70,8 @@ pub struct VoxelCloud<const CAP: usize> {
     finished: bool,
     /// Voxels turned into centroids (after the first [`VoxelCloud::finish_some`]).
     converted: usize,
+    /// Work done by inserts, in [`VoxelCloud::work`] units.
+    work: u64,
     /// Counters.
     pub stats: VoxelStats,
 }
@@ -93,6 +98,7 @@ impl<const CAP: usize> VoxelCloud<CAP> {
             max_level: 0,
             finished: false,
             converted: 0,
+            work: 0,
             stats: VoxelStats {
                 accepted: 0,
                 merged: 0,
@@ -138,6 +144,15 @@ impl<const CAP: usize> VoxelCloud<CAP> {
         self.finest_mm * (1u32 << self.level) as f32
     }
 
+    /// Work done by [`VoxelCloud::insert`] so far, a cost proxy for callers that bound
+    /// their work per call: [`INSERT_WORK`] per point (its `f64` voxel arithmetic and
+    /// search), plus one per voxel shifted to make room for a new one, plus two per voxel
+    /// passed over by a coarsening. One unit is about 20 instructions on the
+    /// Cortex-M4F (a 24-byte voxel moved).
+    pub fn work(&self) -> u64 {
+        self.work
+    }
+
     /// Coarsest voxel edge the cloud may reach, mm.
     pub fn max_voxel_mm(&self) -> f32 {
         self.finest_mm * (1u32 << self.max_level) as f32
@@ -168,6 +183,7 @@ impl<const CAP: usize> VoxelCloud<CAP> {
         let k0 =
             p.map(|v| libm::floor(f64::from(v) / f64::from(self.finest_mm)) as i64 + AXIS_OFFSET);
         let finest = morton([k0.x as u64, k0.y as u64, k0.z as u64]);
+        self.work = self.work.wrapping_add(INSERT_WORK);
         loop {
             let code = finest >> (3 * u32::from(self.level));
             let offset = (p.cast::<f64>() - self.corner(code)).cast::<f32>();
@@ -178,6 +194,7 @@ impl<const CAP: usize> VoxelCloud<CAP> {
                     self.stats.merged = self.stats.merged.saturating_add(1);
                 }
                 Err(i) if self.len < CAP => {
+                    self.work = self.work.wrapping_add((self.len - i) as u64);
                     self.codes.copy_within(i..self.len, i + 1);
                     self.sums.copy_within(i..self.len, i + 1);
                     self.counts.copy_within(i..self.len, i + 1);
@@ -213,26 +230,36 @@ impl<const CAP: usize> VoxelCloud<CAP> {
     /// Doubles the voxel edge and merges voxels that now share a code.
     fn coarsen(&mut self) {
         let child_edge = self.voxel_mm();
+        self.work = self.work.wrapping_add(2 * self.len as u64);
         self.level += 1;
         self.stats.coarsenings = self.stats.coarsenings.saturating_add(1);
-        let mut w = 0usize;
-        for r in 0..self.len {
-            // The three low bits say in which half of its parent the child lies, per axis.
-            let bits = self.codes[r] & 7;
-            let shift = Vec3::new(
+        // The three low bits of a code say in which half of its parent the child lies,
+        // per axis: the child's corner is that far from the parent's.
+        let shifts: [Vec3; 8] = core::array::from_fn(|bits| {
+            Vec3::new(
                 (bits & 1) as f32,
                 ((bits >> 1) & 1) as f32,
                 ((bits >> 2) & 1) as f32,
-            ) * child_edge;
-            let code = self.codes[r] >> 3;
-            let sum = self.sums[r] + shift * self.counts[r] as f32;
-            if w > 0 && self.codes[w - 1] == code {
-                self.sums[w - 1] += sum;
-                self.counts[w - 1] = self.counts[w - 1].saturating_add(self.counts[r]);
+            ) * child_edge
+        });
+        let len = self.len.min(CAP);
+        let (codes, sums, counts) = (
+            &mut self.codes[..len],
+            &mut self.sums[..len],
+            &mut self.counts[..len],
+        );
+        // Merged voxels, the last one at `w - 1` (w <= r: the write never passes the read).
+        let mut w = 0usize;
+        for r in 0..len {
+            let code = codes[r] >> 3;
+            let sum = sums[r] + shifts[(codes[r] & 7) as usize] * counts[r] as f32;
+            if w > 0 && codes[w - 1] == code {
+                sums[w - 1] += sum;
+                counts[w - 1] = counts[w - 1].saturating_add(counts[r]);
             } else {
-                self.codes[w] = code;
-                self.sums[w] = sum;
-                self.counts[w] = self.counts[r];
+                codes[w] = code;
+                sums[w] = sum;
+                counts[w] = counts[r];
                 w += 1;
             }
         }
@@ -306,11 +333,24 @@ pub struct FrameStats {
     pub invalid: u32,
 }
 
+/// Points of placed frames that may wait for the voxel cloud: two full frame messages
+/// (2 × [`crate::wire::MAX_FRAME_PIXELS`] = 192 points × 12 B ≈ 2.3 KiB).
+pub const PENDING_POINTS: usize = 2 * crate::wire::MAX_FRAME_PIXELS;
+
 /// A sweep being compounded: calibration and lag, the pose window and the cloud.
+///
+/// A frame is placed at once ([`Compounder::queue_frame`]: pose, calibration, checks),
+/// but its points may wait in a queue of [`PENDING_POINTS`] for the voxel cloud
+/// ([`Compounder::insert_queued`], a bounded number per call): an insertion costs a few
+/// thousand soft-float instructions on the Cortex-M4F, a whole frame's several hundred
+/// thousand, too much for one call of the controller's loop. [`Compounder::add_frame`]
+/// does both at once. Points leave the queue in order, so the cloud is the same.
 pub struct Compounder<const POSES: usize, const VOXELS: usize> {
     calibration: Calibration,
     ee_t_us: Rigid,
     lag_s: f64,
+    pending: heapless::Deque<Vec3, PENDING_POINTS>,
+    closed: bool,
     /// The tracked flange poses.
     pub track: PoseTrack<POSES>,
     /// The bone-surface cloud, robot base frame.
@@ -357,6 +397,8 @@ impl<const POSES: usize, const VOXELS: usize> Compounder<POSES, VOXELS> {
             },
             ee_t_us: IDENTITY,
             lag_s: 0.0,
+            pending: heapless::Deque::new(),
+            closed: false,
             track: PoseTrack::new(),
             cloud: VoxelCloud::empty(),
             frames: FrameStats {
@@ -386,7 +428,43 @@ impl<const POSES: usize, const VOXELS: usize> Compounder<POSES, VOXELS> {
         self.lag_s = lag_s;
         self.track.clear();
         self.frames = FrameStats::default();
+        self.pending.clear();
+        self.closed = false;
         Ok(())
+    }
+
+    /// Ends the sweep: frames are refused from now on ([`Error::Config`]); the points
+    /// still queued go into the cloud with the next [`Compounder::insert_queued`].
+    pub fn close(&mut self) {
+        self.closed = true;
+    }
+
+    /// Points waiting for the voxel cloud.
+    pub fn queued(&self) -> usize {
+        self.pending.len()
+    }
+
+    /// Moves queued points into the voxel cloud, oldest first, until about `budget` units
+    /// of [`VoxelCloud::work`] are done (at least one point if any is queued; the last
+    /// may overshoot by one insert: a point and a shift of the whole cloud; an insert
+    /// into a full cloud, which may coarsen it, comes first in its call); `true` when
+    /// none is left.
+    pub fn insert_queued(&mut self, budget: u64) -> bool {
+        let start = self.cloud.work();
+        while self.cloud.work().wrapping_sub(start) < budget {
+            // A full cloud may coarsen at the next point: that starts a call of its own.
+            if self.cloud.len() >= VOXELS && self.cloud.work() != start {
+                break;
+            }
+            let Some(q) = self.pending.pop_front() else {
+                break;
+            };
+            // Note: cannot fail: the point was checked when queued, and the cloud is
+            // finished only by its owner after the queue is empty (a full cloud refuses
+            // with Ok(false), counted in its stats).
+            let _ = self.cloud.insert(&q);
+        }
+        self.pending.is_empty()
     }
 
     /// The lag in use, s.
@@ -399,12 +477,27 @@ impl<const POSES: usize, const VOXELS: usize> Compounder<POSES, VOXELS> {
         self.track.push(pose)
     }
 
-    /// Adds a frame stamped `t` (video clock) with its bone pixels `(u, v)`. Returns the
-    /// points kept. The frame is all or nothing: a pixel outside the image or not finite
-    /// is [`Error::Pixel`], a time outside the tracked range [`Error::OutsideTrack`] or
-    /// [`Error::TrackGap`]; nothing of that frame is added and [`Compounder::frames`]
-    /// counts it.
+    /// Adds a frame stamped `t` (video clock) with its bone pixels `(u, v)` to the cloud
+    /// ([`Compounder::queue_frame`], then every queued point inserted). Returns the points
+    /// kept by the cloud in this call.
     pub fn add_frame(&mut self, t: f64, pixels: &[[f32; 2]]) -> Result<u32> {
+        let before = self.cloud.stats.accepted;
+        self.queue_frame(t, pixels)?;
+        self.insert_queued(u64::MAX);
+        Ok(self.cloud.stats.accepted.wrapping_sub(before))
+    }
+
+    /// Places a frame stamped `t` (video clock) with its bone pixels `(u, v)` and queues
+    /// its points for the cloud; returns how many. The frame is all or nothing: a pixel
+    /// outside the image or not finite is [`Error::Pixel`], a time outside the tracked
+    /// range [`Error::OutsideTrack`] or [`Error::TrackGap`], after
+    /// [`Compounder::close`] [`Error::Config`]; nothing of that frame is added and
+    /// [`Compounder::frames`] counts it. When the queue is full the oldest points go into
+    /// the cloud first (the caller fell behind with [`Compounder::insert_queued`]).
+    pub fn queue_frame(&mut self, t: f64, pixels: &[[f32; 2]]) -> Result<usize> {
+        if self.closed {
+            return Err(Error::Config("the sweep has ended"));
+        }
         let probe = self.calibration.probe;
         if let Some(i) = pixels
             .iter()
@@ -443,15 +536,17 @@ impl<const POSES: usize, const VOXELS: usize> Compounder<POSES, VOXELS> {
             self.frames.invalid = self.frames.invalid.saturating_add(1);
             return Err(Error::Pixel { index: i as u32 });
         }
-        let mut kept = 0u32;
+        let mut queued = 0;
         for q in pixels.iter().filter_map(point) {
-            // Checked above: only a full cloud (counted) or a finished one refuses.
-            if self.cloud.insert(&q)? {
-                kept += 1;
+            if self.pending.is_full() {
+                self.insert_queued(1);
             }
+            // Note: room was just made.
+            let _ = self.pending.push_back(q);
+            queued += 1;
         }
         self.frames.placed = self.frames.placed.saturating_add(1);
-        Ok(kept)
+        Ok(queued)
     }
 }
 

@@ -36,6 +36,7 @@
 use crate::compound::{Compounder, DEFAULT_MAX_COARSENINGS};
 use crate::error::{Error, Result};
 use crate::geom::Rigid;
+use crate::local_rigid::{Lookup, TransformCache};
 use crate::pipeline::{Config, Registering, Registration, Template, MIN_CLOUD_POINTS};
 use crate::probe::Calibration;
 use crate::skeleton::{SKELETON_POINTS, SOM1_CAPACITY};
@@ -71,6 +72,14 @@ pub const SOM_ITERATIONS_PER_POLL: u32 = 8;
 /// ~1,800 instructions each on the emulated Cortex-M4F (10 calls of 96 took 1.79 M, the
 /// worst 187 k), so 64 stay near 120 k.
 pub const VOXELS_FINISHED_PER_POLL: usize = 64;
+/// Work ([`crate::compound::VoxelCloud::work`], ~20 instructions a unit) spent per
+/// [`Controller::poll`] moving queued sweep points into the voxel cloud (a frame message
+/// only places its points, see [`Compounder`]): 16 plain points, fewer when they start
+/// voxels that shift the sorted cloud; plus at most one more insert, which with a
+/// coarsening of the full cloud is ~5,000 units.
+pub const SWEEP_WORK_PER_POLL: u64 = 2048;
+/// Transform cache of the waypoint mapping (waypoints rarely share a neighbourhood).
+const WAYPOINT_CACHE: usize = 4;
 /// Replies waiting to be sent: a poll emits at most one setpoint or fault and the
 /// results, a received frame one reply; 32 covers a whole result (≤ 32 waypoints).
 pub const OUTBOX: usize = 40;
@@ -138,6 +147,10 @@ pub struct Controller<const VOXELS: usize> {
     probe_count: u32,
     registering: Option<Registering>,
     targets: heapless::Vec<ProbeTarget, MAX_WAYPOINTS>,
+    /// The next waypoint's transform being found (bounded steps), then found.
+    lookup: Option<Lookup>,
+    mapped: Option<(Rigid, u32)>,
+    waypoint_cache: TransformCache<WAYPOINT_CACHE>,
     last_pose: Option<(u64, Rigid)>,
     poses: u32,
     segment: Option<Segment>,
@@ -178,6 +191,9 @@ impl<const VOXELS: usize> Controller<VOXELS> {
             probe_count: 0,
             registering: None,
             targets: heapless::Vec::new(),
+            lookup: None,
+            mapped: None,
+            waypoint_cache: TransformCache::new(),
             last_pose: None,
             poses: 0,
             segment: None,
@@ -212,7 +228,11 @@ impl<const VOXELS: usize> Controller<VOXELS> {
 
     /// The compounded cloud once the sweep has ended (robot base frame).
     pub fn cloud(&mut self) -> Option<&[Vec3]> {
-        self.cloud_ready.then(|| self.sweep.cloud.finish())
+        if !self.cloud_ready {
+            return None;
+        }
+        self.sweep.insert_queued(u64::MAX);
+        Some(self.sweep.cloud.finish())
     }
 
     /// The next reply to send, with its sequence number.
@@ -410,7 +430,7 @@ impl<const VOXELS: usize> Controller<VOXELS> {
                     ];
                 }
                 self.sweep
-                    .add_frame(f.t_us as f64 * 1e-6, &pixels[..f.pixels.len()])
+                    .queue_frame(f.t_us as f64 * 1e-6, &pixels[..f.pixels.len()])
                     .map(|_| ())
                     .map_err(invalid)
             }
@@ -470,9 +490,9 @@ impl<const VOXELS: usize> Controller<VOXELS> {
             }
             Command::EndSweep => {
                 self.require(&[Sweeping])?;
-                // Closes the cloud; the voxels become centroids in bounded steps in
-                // `poll` before the registration starts.
-                self.sweep.cloud.finish_some(0);
+                // No more frames; the queued points go into the cloud and the voxels
+                // become centroids in bounded steps in `poll`, before the registration.
+                self.sweep.close();
                 self.cloud_ready = true;
                 self.state = TemplateLoaded;
                 Ok(())
@@ -482,7 +502,9 @@ impl<const VOXELS: usize> Controller<VOXELS> {
                 if !self.cloud_ready {
                     return Err(NackCode::BadState);
                 }
-                let points = self.sweep.cloud.len();
+                // At most this many voxels once the queued points are in (the
+                // registration checks the final count again).
+                let points = self.sweep.cloud.len() + self.sweep.queued();
                 if points < MIN_CLOUD_POINTS {
                     return Err(invalid(Error::TooFewPoints {
                         cloud: crate::error::Cloud::Target,
@@ -577,13 +599,21 @@ impl<const VOXELS: usize> Controller<VOXELS> {
         }
     }
 
+    /// True while `poll` has work regardless of the time: registering, or sweep points
+    /// queued for the cloud (a caller may sleep until the next message otherwise).
+    pub fn busy(&self) -> bool {
+        self.state == State::Registering || self.sweep.queued() > 0
+    }
+
     /// The periodic work: one bounded registration step, setpoints, the pose watchdog.
     /// Call it at least every [`SETPOINT_PERIOD_US`].
     pub fn poll(&mut self, now_us: u64) {
         match self.state {
             State::Registering => self.register_step(),
             State::Executing => self.execute(now_us),
-            _ => {}
+            _ => {
+                self.sweep.insert_queued(SWEEP_WORK_PER_POLL);
+            }
         }
     }
 
@@ -591,9 +621,11 @@ impl<const VOXELS: usize> Controller<VOXELS> {
     fn register_step(&mut self) {
         let cfg = Config::improved();
         if self.registering.is_none() {
-            // First the voxel centroids, then the registration's set-up, each in calls of
-            // their own.
-            if self.sweep.cloud.finish_some(0) {
+            // First the queued sweep points, then the voxel centroids, then the
+            // registration's set-up, each in calls of their own.
+            if !self.sweep.insert_queued(0) {
+                self.sweep.insert_queued(SWEEP_WORK_PER_POLL);
+            } else if self.sweep.cloud.finish_some(0) {
                 self.targets.clear();
                 self.start_registration(&cfg);
             } else {
@@ -606,26 +638,38 @@ impl<const VOXELS: usize> Controller<VOXELS> {
             return;
         };
         let cloud = self.sweep.cloud.finish();
+        let finished_before = r.registration().is_some();
         let outcome = match r.step(template, cloud, &cfg, SOM_ITERATIONS_PER_POLL) {
             Ok(false) => return,
-            // Then one waypoint per call.
+            // The registration's last step is a call of its own.
+            Ok(true) if !finished_before => return,
+            // Then each waypoint in calls of its own: its transform (widening, fit),
+            // then its probe pose.
             Ok(true) => match (r.registration(), self.waypoints.get(self.targets.len())) {
-                (Some(reg), Some(w)) => {
-                    let t = target(
-                        reg,
+                (Some(reg), Some(w)) => match self.mapped.take() {
+                    None => match reg.map.transform_step(
                         w,
-                        cloud,
-                        self.settings.as_ref(),
-                        self.probe_sum,
-                        self.probe_count,
-                    );
-                    // Note: a push cannot fail, waypoints and targets share MAX_WAYPOINTS.
-                    match t.map(|t| self.targets.push(t)) {
-                        Ok(_) if self.targets.len() < self.waypoints.len() => return,
-                        Ok(_) => Ok(()),
+                        &mut self.lookup,
+                        &mut self.waypoint_cache,
+                        SOM_ITERATIONS_PER_POLL,
+                    ) {
+                        Ok(found) => {
+                            self.mapped = found;
+                            return;
+                        }
                         Err(e) => Err(e),
+                    },
+                    Some((t, mask)) => {
+                        let s = self.settings.as_ref();
+                        let t = target(reg, w, t, mask, cloud, s, self.probe_sum, self.probe_count);
+                        // Note: a push cannot fail, waypoints and targets share MAX_WAYPOINTS.
+                        match t.map(|t| self.targets.push(t)) {
+                            Ok(_) if self.targets.len() < self.waypoints.len() => return,
+                            Ok(_) => Ok(()),
+                            Err(e) => Err(e),
+                        }
                     }
-                }
+                },
                 (Some(_), None) => Ok(()),
                 (None, _) => Err(Error::Config("the registration did not finish")),
             },
@@ -643,6 +687,9 @@ impl<const VOXELS: usize> Controller<VOXELS> {
 
     #[inline(never)]
     fn start_registration(&mut self, cfg: &Config) {
+        self.lookup = None;
+        self.mapped = None;
+        self.waypoint_cache = TransformCache::new();
         match crate::pipeline::Registering::start(self.sweep.cloud.finish(), cfg) {
             Ok(r) => self.registering = Some(r),
             Err(e) => self.fail(e),
@@ -735,9 +782,12 @@ impl<const VOXELS: usize> Controller<VOXELS> {
 
 /// Maps one waypoint and turns it into a probe target.
 #[inline(never)]
+#[allow(clippy::too_many_arguments)]
 fn target(
     reg: &Registration,
     w: &Vec3,
+    t: Rigid,
+    mask: u32,
     cloud: &[Vec3],
     settings: Option<&Settings>,
     probe_sum: Vec3,
@@ -749,7 +799,7 @@ fn target(
     } else {
         Vec3::zeros()
     };
-    let (t, quality_mm) = reg.map.transform_with_residual(w)?;
+    let quality_mm = reg.map.residual(&t, mask);
     let p = t.apply(w);
     let tcp = probe_pose(cloud, &p, &skin, s.standoff);
     Ok(ProbeTarget {

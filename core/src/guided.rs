@@ -35,7 +35,7 @@ use crate::fit::{equal_steps, PolyFit};
 use crate::geom::{Frame, Rigid};
 use crate::kabsch;
 use crate::kdtree::KdTree;
-use crate::local_rigid::{LocalRigid, TransformCache};
+use crate::local_rigid::{LocalRigid, Lookup, TransformCache};
 use crate::skeleton::{SkeletonGraph, RIBS, RIB_SAMPLES, SKELETON_POINTS, SOM1_CAPACITY};
 use crate::Vec3;
 
@@ -266,6 +266,7 @@ pub struct TargetSkeleton {
     skeleton: [Vec3; SKELETON_POINTS],
     map: Option<LocalRigid>,
     cache: TransformCache<CARRY_CACHE>,
+    lookup: Option<Lookup>,
 }
 
 impl Default for TargetSkeleton {
@@ -312,6 +313,7 @@ impl TargetSkeleton {
             skeleton: [Vec3::zeros(); SKELETON_POINTS],
             map: None,
             cache: TransformCache::new(),
+            lookup: None,
         }
     }
 
@@ -339,6 +341,7 @@ impl TargetSkeleton {
         self.ribs = None;
         self.map = None;
         self.cache = TransformCache::new();
+        self.lookup = None;
         self.begin(GuidedStage::Index)
     }
 
@@ -474,22 +477,29 @@ impl TargetSkeleton {
                     neighbours,
                 )?);
                 self.cache = TransformCache::new();
+                self.lookup = None;
                 self.begin(GuidedStage::Carry(round))?;
             }
             GuidedStage::Carry(round) => {
                 let map = self.map.as_ref().ok_or(Error::RigidFit)?;
                 let n = self.carried.len().min(template.som1.len());
                 let (mut i, mut done) = (cursor, 0);
-                // `queries` nodes, but a node needing a new fit (a unit of its own)
-                // comes first in its call.
+                // `queries` nodes found in the cache; a neighbourhood being widened or
+                // fitted ends the call (a fit is a call of its own).
                 while i < n && done < queries {
                     let p = &template.som1[i];
-                    if done > 0 && !self.cache.contains(map.neighbourhood(p)) {
+                    let busy = self.lookup.is_some();
+                    let Some((t, _)) =
+                        map.transform_step(p, &mut self.lookup, &mut self.cache, budget as u32)?
+                    else {
                         break;
-                    }
-                    self.carried[i] = map.map_point(p, &mut self.cache)?;
+                    };
+                    self.carried[i] = t.apply(p);
                     i += 1;
                     done += 1;
+                    if busy {
+                        break;
+                    }
                 }
                 self.cursor = i as u32;
                 if i >= n {

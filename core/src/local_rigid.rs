@@ -38,7 +38,8 @@ pub const CACHE_CAPACITY: usize = 128;
 
 /// Fixed-capacity map from neighbourhood bit set to its fitted transform.
 pub struct TransformCache<const CAP: usize> {
-    map: heapless::index_map::FnvIndexMap<u32, Rigid, CAP>,
+    /// Neighbourhood → (transform, widened neighbourhood).
+    map: heapless::index_map::FnvIndexMap<u32, (Rigid, u32), CAP>,
     /// Transforms looked up and found.
     pub hits: u32,
     /// Transforms fitted.
@@ -64,9 +65,26 @@ impl<const CAP: usize> TransformCache<CAP> {
         }
     }
 
-    /// True when the transform of neighbourhood `mask` is kept.
-    pub fn contains(&self, mask: u32) -> bool {
-        self.map.contains_key(&mask)
+    /// The kept transform of neighbourhood `key` and the widened set it was fitted on
+    /// (a hit is counted).
+    pub fn get(&mut self, key: u32) -> Option<(Rigid, u32)> {
+        let found = self.map.get(&key).copied();
+        if found.is_some() {
+            self.hits += 1;
+        }
+        found
+    }
+
+    /// Keeps the freshly fitted transform `t` of neighbourhood `key` (widened to `mask`),
+    /// counted in [`TransformCache::fits`]; a full cache starts over (module docs).
+    pub fn keep(&mut self, key: u32, t: Rigid, mask: u32) {
+        self.fits += 1;
+        if self.map.insert(key, (t, mask)).is_err() {
+            self.restarts += 1;
+            self.map.clear();
+            // Note: the map was just emptied; a capacity-0 cache keeps nothing.
+            let _ = self.map.insert(key, (t, mask));
+        }
     }
 
     /// Distinct neighbourhoods kept.
@@ -78,6 +96,17 @@ impl<const CAP: usize> TransformCache<CAP> {
     pub fn is_empty(&self) -> bool {
         self.map.is_empty()
     }
+}
+
+/// A neighbourhood being widened for [`LocalRigid::transform_step`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Lookup {
+    /// The point's `N_r`-set (the cache key).
+    key: u32,
+    /// Widened so far.
+    mask: u32,
+    /// `mask` is final: the next step fits it.
+    ready: bool,
 }
 
 /// The 30 paired skeleton points and the mapping they define.
@@ -113,15 +142,24 @@ impl LocalRigid {
 
     /// `mask` widened until it is not collinear (see the module docs).
     pub fn widened(&self, mut mask: u32) -> u32 {
-        while self.collinear(mask) && mask.count_ones() < SKELETON_POINTS as u32 {
-            let mut sum = Vec3::zeros();
-            for i in bits(mask) {
-                sum += self.source[i];
-            }
-            let centroid = sum / mask.count_ones() as f32;
-            mask = nearest_set(&self.source, &centroid, 1, mask);
+        while let Some(wider) = self.widen_once(mask) {
+            mask = wider;
         }
         mask
+    }
+
+    /// `mask` with the next skeleton point added, or `None` when it is final (not
+    /// collinear, or all 30 points).
+    pub fn widen_once(&self, mask: u32) -> Option<u32> {
+        if mask.count_ones() >= SKELETON_POINTS as u32 || !self.collinear(mask) {
+            return None;
+        }
+        let mut sum = Vec3::zeros();
+        for i in bits(mask) {
+            sum += self.source[i];
+        }
+        let centroid = sum / mask.count_ones() as f32;
+        Some(nearest_set(&self.source, &centroid, 1, mask))
     }
 
     fn collinear(&self, mask: u32) -> bool {
@@ -149,11 +187,17 @@ impl LocalRigid {
     pub fn transform_with_residual(&self, p: &Vec3) -> Result<(Rigid, f32)> {
         let mask = self.widened(self.neighbourhood(p));
         let t = self.fit(mask)?;
+        Ok((t, self.residual(&t, mask)))
+    }
+
+    /// RMS distance, mm, between the target points of `mask` and its source points moved
+    /// by `t` ([`LocalRigid::transform_with_residual`]).
+    pub fn residual(&self, t: &Rigid, mask: u32) -> f32 {
         let mut sum = 0.0;
         for i in bits(mask) {
             sum += (t.apply(&self.source[i]) - self.target[i]).norm_squared();
         }
-        Ok((t, libm::sqrtf(sum / mask.count_ones().max(1) as f32)))
+        libm::sqrtf(sum / mask.count_ones().max(1) as f32)
     }
 
     /// Fits the rigid transform of a neighbourhood.
@@ -174,20 +218,59 @@ impl LocalRigid {
         p: &Vec3,
         cache: &mut TransformCache<CAP>,
     ) -> Result<Rigid> {
-        let mask = self.neighbourhood(p);
-        if let Some(t) = cache.map.get(&mask) {
-            cache.hits += 1;
-            return Ok(*t);
+        let mut lookup = None;
+        loop {
+            if let Some((t, _)) = self.transform_step(p, &mut lookup, cache, u32::MAX)? {
+                return Ok(t);
+            }
         }
-        let t = self.fit(self.widened(mask))?;
-        cache.fits += 1;
-        if cache.map.insert(mask, t).is_err() {
-            cache.restarts += 1;
-            cache.map.clear();
-            // Note: the map was just emptied; a capacity-0 cache keeps nothing.
-            let _ = cache.map.insert(mask, t);
+    }
+
+    /// [`LocalRigid::transform_for`] in bounded steps, for the controller: each call
+    /// either finds the transform in the cache, or widens the neighbourhood by at most
+    /// `widenings` points (a widening costs about a symmetric 3×3 eigen-decomposition),
+    /// or fits it (an `f64` Kabsch). `lookup` carries the neighbourhood between the calls
+    /// for one point: start with `None` and pass the same `p` until the transform comes
+    /// back with its final neighbourhood (for [`LocalRigid::residual`]); `lookup` is then
+    /// `None` again. The result equals [`LocalRigid::transform_for`]'s.
+    pub fn transform_step<const CAP: usize>(
+        &self,
+        p: &Vec3,
+        lookup: &mut Option<Lookup>,
+        cache: &mut TransformCache<CAP>,
+        widenings: u32,
+    ) -> Result<Option<(Rigid, u32)>> {
+        let mut l = match *lookup {
+            Some(l) => l,
+            None => {
+                let key = self.neighbourhood(p);
+                if let Some(found) = cache.get(key) {
+                    return Ok(Some(found));
+                }
+                Lookup {
+                    key,
+                    mask: key,
+                    ready: false,
+                }
+            }
+        };
+        if l.ready {
+            *lookup = None;
+            let t = self.fit(l.mask)?;
+            cache.keep(l.key, t, l.mask);
+            return Ok(Some((t, l.mask)));
         }
-        Ok(t)
+        for _ in 0..widenings.max(1) {
+            match self.widen_once(l.mask) {
+                Some(wider) => l.mask = wider,
+                None => {
+                    l.ready = true;
+                    break;
+                }
+            }
+        }
+        *lookup = Some(l);
+        Ok(None)
     }
 
     /// Maps one point. A point with a NaN, infinite or out-of-range coordinate is

@@ -238,8 +238,10 @@ impl GraphBuild {
                     trainer.run(map, cloud, budget);
                     return Ok(false);
                 }
-                // The dead-unit scan: one map scan per point, as a SOM iteration.
-                if !scan.step(map, cloud, budget) {
+                // The dead-unit scan: one map scan per point, as a SOM iteration; the
+                // stage change after it is a call of its own.
+                if !scan.step(map, cloud, 0) {
+                    scan.step(map, cloud, budget);
                     return Ok(false);
                 }
                 let mut live1 = heapless::Vec::new();
@@ -257,8 +259,10 @@ impl GraphBuild {
                     trainer.run(map, live1, budget);
                     return Ok(false);
                 }
-                // A scan of the 40-node map costs a tenth of a SOM-1 one.
-                if !scan.step(map, live1, budget.saturating_mul(8)) {
+                // A scan of the 40-node map costs a tenth of a SOM-1 one. MST, hull and
+                // endpoints after it are a call of their own.
+                if !scan.step(map, live1, 0) {
+                    scan.step(map, live1, budget.saturating_mul(8));
                     return Ok(false);
                 }
                 let mut key_points = heapless::Vec::new();

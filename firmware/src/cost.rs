@@ -52,12 +52,21 @@ pub const INSTRUCTIONS_PER_TICK: u64 = 40;
 /// The word cortex-m-rt paints the stack with (`cortex_m_rt::STACK_PAINT_VALUE`).
 pub const STACK_PAINT: u32 = 0xCCCC_CCCC;
 
-/// Ticks since SysTick was started, from the wrap count and the current value register
-/// (which counts down from [`RELOAD`]).
+/// Ticks since SysTick was started, from the wrap count and the current value register.
+/// The counter pends its wrap as it reaches 0 and reloads on the next tick, so a period
+/// reads 0, [`RELOAD`], …, 1: 0 is the period's first tick, not its last. (Reading 0 as
+/// the last tick put a stamp taken just after a wrap one period late, and a call
+/// measured to it one period, 1 M instructions, long: the sporadic ~1.0 M "worst" loop
+/// turns and frame handlings reported before.)
 pub const fn ticks_from(wraps: u64, current: u32) -> u64 {
     let value = current & 0x00FF_FFFF;
     let value = if value > RELOAD { RELOAD } else { value };
-    wraps * PERIOD_TICKS + (RELOAD - value) as u64
+    let offset = if value == 0 {
+        0
+    } else {
+        PERIOD_TICKS - value as u64
+    };
+    wraps * PERIOD_TICKS + offset
 }
 
 /// One consistent reading of the free-running counter, taken with interrupts masked:
@@ -139,9 +148,8 @@ mod target {
             cortex_m::interrupt::free(|_| {
                 syst.enable_counter();
                 // The value register reads 0 until the counter has loaded the reload
-                // value (one tick on hardware, longer under QEMU without -icount); a 0
-                // would read as the end of period 0, and time would then jump back.
-                // Loading may also pend the wrap exception: start from zero wraps after.
+                // value (one tick on hardware, longer under QEMU without -icount), and
+                // loading may pend the wrap exception: start from zero wraps after it.
                 while SYST::get_current() == 0 {}
                 SCB::clear_pendst();
                 WRAPS.store(0, Ordering::Relaxed);
@@ -330,11 +338,14 @@ mod tests {
 
     #[test]
     fn ticks_count_down_within_a_period() {
-        assert_eq!(ticks_from(0, RELOAD), 0);
-        assert_eq!(ticks_from(0, 0), u64::from(RELOAD));
-        assert_eq!(ticks_from(3, RELOAD - 10), 3 * PERIOD_TICKS + 10);
+        // A period reads 0 (the wrap), RELOAD, ..., 1.
+        assert_eq!(ticks_from(0, 0), 0);
+        assert_eq!(ticks_from(0, RELOAD), 1);
+        assert_eq!(ticks_from(0, 1), u64::from(RELOAD));
+        assert_eq!(ticks_from(1, 0), PERIOD_TICKS);
+        assert_eq!(ticks_from(3, RELOAD - 10), 3 * PERIOD_TICKS + 11);
         // Bits above the 24-bit counter are ignored.
-        assert_eq!(ticks_from(0, 0xFF00_0000 | RELOAD), 0);
+        assert_eq!(ticks_from(0, 0xFF00_0000 | RELOAD), 1);
     }
 
     #[test]
@@ -343,25 +354,27 @@ mod tests {
         // `after` just below the reload, the handler has not run yet.
         let near_end = ticks_from(7, 2);
         let next = reading(7, 2, true, RELOAD - 1);
-        assert_eq!(next, 8 * PERIOD_TICKS + 1);
+        assert_eq!(next, 8 * PERIOD_TICKS + 2);
         assert!(next > near_end);
         // Pending read as clear: `before` is valid and `after` is ignored.
         assert_eq!(reading(7, 2, false, 12345), near_end);
         // Monotone across a whole simulated run of wraps.
         let mut last = 0;
         for wraps in 0..4u32 {
-            for value in [RELOAD, RELOAD / 2, 1, 0] {
+            for value in [0, RELOAD, RELOAD / 2, 1] {
                 let t = reading(wraps, value, false, value);
                 assert!(t >= last);
                 last = t;
             }
-            let t = reading(wraps, 0, true, RELOAD);
-            assert!(t >= last);
+            // The wrap pended, the handler not run yet: the next period's first tick.
+            let t = reading(wraps, 1, true, 0);
+            assert!(t > last);
+            assert_eq!(t, reading(wraps + 1, 0, false, 0));
             last = t;
         }
         // The u32 wrap count (2^32 periods of 1 ms, about 49 days) plus a pending wrap
         // does not overflow.
-        assert_eq!(reading(u32::MAX, 0, true, RELOAD), (1 << 32) * PERIOD_TICKS);
+        assert_eq!(reading(u32::MAX, 1, true, 0), (1 << 32) * PERIOD_TICKS);
     }
 
     #[test]

@@ -2,9 +2,13 @@
 //!
 //! The main loop serves the robot PC over UART0 with the protocol of
 //! `ribreg_core::wire` and runs `ribreg_core::controller::Controller`: every turn it
-//! takes the bytes that arrived (each complete frame goes to the controller), calls the
-//! controller's bounded `poll` (one registration step, setpoints, the pose watchdog) and
-//! sends the replies. When there is nothing to do (not registering, not executing, no
+//! takes the bytes that arrived up to the first complete frame, which goes to the
+//! controller; a turn without one calls the controller's bounded `poll` instead (one
+//! registration step, queued sweep points, setpoints, the pose watchdog; while executing
+//! it is polled every turn, its poll is small and keeps the setpoints' clock). A turn
+//! after one that took a frame only polls, so under a burst of messages the two
+//! alternate. Then it sends the replies. So a turn makes one bounded controller call,
+//! whatever the host sent meanwhile (the rest waits in the link). When there is nothing to do (not registering, not executing, no
 //! byte waiting) it sleeps in WFI until a byte arrives. Every call is measured in
 //! instructions with SysTick (`-icount shift=0`: 40 per tick) and the worst cases and the
 //! registration's total are reported on `Command::Cost`.
@@ -29,6 +33,10 @@ mod uart;
 /// The frame that ends the run.
 #[cfg(any(target_os = "none", test))]
 const QUIT: [u8; 4] = *b"QUIT";
+
+/// A controller call above this many instructions (1 ms at 168 MHz) is logged.
+#[cfg(target_os = "none")]
+const LONG_CALL: u64 = 168_000;
 
 /// Iterations of [`cost::spin`] timed at boot (2 instructions each).
 #[cfg(any(target_os = "none", test))]
@@ -116,11 +124,16 @@ mod app {
         let mut reg_started = false;
         let mut stages = cost::StageCosts::new();
         let mut turns: u32 = 0;
+        let mut received = false;
         loop {
             let turn = Cost::start();
             let now = now_us();
-            // 1. Every byte that has arrived; a complete frame goes to the controller.
-            while let Ok(true) = uart.read_ready() {
+            // 1. The bytes that have arrived, up to a complete frame for the controller;
+            // not right after a turn that took one, so that polls keep up with a burst
+            // (queued sweep points, registration) and receiving and polling alternate.
+            let took_last_turn = received;
+            received = false;
+            while !took_last_turn && matches!(uart.read_ready(), Ok(true)) {
                 let mut byte = [0u8; 1];
                 if !matches!(uart.read(&mut byte), Ok(1)) {
                     break;
@@ -130,35 +143,55 @@ mod app {
                         stages.log();
                         quit(&mut uart, boot, &cal, &cost);
                     }
+                    let (before, len) = (controller.state(), frame.as_ref().map_or(0, |f| f.len()));
                     let call = Cost::start();
                     controller.receive(frame, now);
                     let n = call.elapsed_instructions();
+                    if n > crate::LONG_CALL {
+                        defmt::warn!(
+                            "long receive: {=u64} instructions, {=usize}-byte frame, {} -> {}",
+                            n,
+                            len,
+                            before,
+                            controller.state()
+                        );
+                    }
                     cost.worst_receive_instructions = cost.worst_receive_instructions.max(clamp(n));
+                    received = true;
+                    break;
                 }
             }
-            // 2. One bounded step of the periodic work.
+            // 2. Otherwise (or executing) one bounded step of the periodic work.
             let registering = controller.state() == State::Registering;
             if registering && !reg_started {
                 cost.registration_instructions = 0;
                 cost.registration_calls = 0;
                 reg_started = true;
             }
-            let stage = controller.registration_stage();
-            let step = Cost::start();
-            controller.poll(now_us());
-            let n = step.elapsed_instructions();
-            if let Some(stage) = stage {
-                stages.add(stage, n);
-            }
-            if registering {
-                cost.registration_instructions += n;
-                cost.registration_calls += 1;
-                cost.worst_step_instructions = cost.worst_step_instructions.max(clamp(n));
-            } else {
+            if !registering {
                 reg_started = false;
             }
+            if !received || controller.state() == State::Executing {
+                let (stage, before) = (controller.registration_stage(), controller.state());
+                let step = Cost::start();
+                controller.poll(now_us());
+                let n = step.elapsed_instructions();
+                if n > crate::LONG_CALL {
+                    defmt::warn!("long poll: {=u64} instructions, {}", n, before);
+                }
+                if let Some(stage) = stage {
+                    stages.add(stage, n);
+                }
+                if registering {
+                    cost.registration_instructions += n;
+                    cost.registration_calls += 1;
+                    cost.worst_step_instructions = cost.worst_step_instructions.max(clamp(n));
+                }
+            }
             // 3. The replies.
+            let mut replies = 0u32;
             while let Some((seq, msg)) = controller.next_reply() {
+                replies += 1;
                 match wire::encode(seq, &msg, &mut out) {
                     Ok(n) => {
                         if let Err(e) = uart.write_all(&out[..n]) {
@@ -168,9 +201,16 @@ mod app {
                     Err(e) => defmt::warn!("encode: {}", e),
                 }
             }
-            cost.worst_call_instructions = cost
-                .worst_call_instructions
-                .max(clamp(turn.elapsed_instructions()));
+            let n = turn.elapsed_instructions();
+            if n > crate::LONG_CALL {
+                defmt::warn!(
+                    "long turn: {=u64} instructions, {=u32} replies, {}",
+                    n,
+                    replies,
+                    controller.state()
+                );
+            }
+            cost.worst_call_instructions = cost.worst_call_instructions.max(clamp(n));
             // The stack scan reads the whole painted region (~13,500 words): on the
             // first turn and every 256th after, not every turn (the high-water mark only
             // grows, so it lags at most 256 turns; `quit` scans once more).
@@ -182,7 +222,7 @@ mod app {
             // 4. Nothing to do: sleep until a byte arrives (executing: or the next 1 ms
             // SysTick, so setpoints and the watchdog keep their time).
             match controller.state() {
-                State::Registering => {}
+                _ if controller.busy() => {}
                 State::Executing => uart.sleep_until_rx_or_interrupt(),
                 _ => {
                     if !matches!(uart.read_ready(), Ok(true)) {
