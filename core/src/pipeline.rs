@@ -324,7 +324,9 @@ impl Registering {
     ) -> Result<bool> {
         match &mut self.stage {
             Stage::Graph(build) => {
-                if !build.step(target, cfg, budget)? {
+                // The stage change after the graph is built is a call of its own.
+                let built = build.graph().is_some();
+                if !build.step(target, cfg, budget)? || !built {
                     return Ok(false);
                 }
                 self.graph_done(template, cfg)

@@ -176,6 +176,11 @@ enum GraphStage {
         SomTrainer,
         LiveScan<KEY_POINTS>,
     ),
+    /// The live SOM-1 nodes and the key points, before MST, hull and endpoints.
+    Keys(
+        heapless::Vec<Vec3, SOM1_CAPACITY>,
+        heapless::Vec<Vec3, KEY_POINTS>,
+    ),
     Done(SkeletonGraph),
     Failed,
 }
@@ -208,18 +213,19 @@ impl GraphBuild {
         match &self.stage {
             GraphStage::Som1(_, t, _) => (t.done(), total),
             GraphStage::Som2(_, _, t, _) => (cfg.som1.iterations + t.done(), total),
-            GraphStage::Done(_) | GraphStage::Failed => (total, total),
+            GraphStage::Keys(..) | GraphStage::Done(_) | GraphStage::Failed => (total, total),
         }
     }
 
     /// What the next step works on, for cost reports: `"som1"`, `"scan1"` (SOM-1
-    /// dead units), `"som2"`, `"scan2"` (then the MST, hull and endpoints), `"built"`.
+    /// dead units), `"som2"`, `"scan2"`, `"graph"` (MST, hull, endpoints), `"built"`.
     pub fn stage(&self) -> &'static str {
         match &self.stage {
             GraphStage::Som1(_, t, _) if !t.finished() => "som1",
             GraphStage::Som1(..) => "scan1",
             GraphStage::Som2(_, _, t, _) if !t.finished() => "som2",
             GraphStage::Som2(..) => "scan2",
+            GraphStage::Keys(..) => "graph",
             GraphStage::Done(_) | GraphStage::Failed => "built",
         }
     }
@@ -268,6 +274,11 @@ impl GraphBuild {
                 let mut key_points = heapless::Vec::new();
                 scan.finish(map, &mut key_points)?;
                 let live1 = core::mem::take(live1);
+                self.stage = GraphStage::Keys(live1, key_points);
+                Ok(false)
+            }
+            GraphStage::Keys(live1, key_points) => {
+                let (live1, key_points) = (core::mem::take(live1), core::mem::take(key_points));
                 self.stage = GraphStage::Failed;
                 let graph = SkeletonGraph::from_key_points(
                     live1,
