@@ -231,7 +231,7 @@ impl<const VOXELS: usize> Controller<VOXELS> {
         if !self.cloud_ready {
             return None;
         }
-        self.sweep.insert_queued(u64::MAX);
+        while !self.sweep.insert_queued(u64::MAX) {}
         Some(self.sweep.cloud.finish())
     }
 

@@ -383,6 +383,37 @@ mod tests {
         assert_eq!(map.widened(ordinary), ordinary);
     }
 
+    /// The bounded lookup gives `transform_for`'s transform and
+    /// `transform_with_residual`'s residual, one widening per call, a fit in a call of
+    /// its own, and a cache hit at once.
+    #[test]
+    fn transform_steps_equal_the_direct_lookup() {
+        let src = skeleton();
+        let dst = src.map(|p| p + Vec3::new(0.01 * p.y, 2.0, -1.0));
+        let map = LocalRigid::new(src, dst, NEIGHBOURS).unwrap();
+        // A point by the straight rib needs widening, one by a curved rib may not.
+        for p in [Vec3::new(0.0, -400.0, 0.0), Vec3::new(0.0, -30.0, 0.0)] {
+            let mut cache = TransformCache::<4>::new();
+            let (mut lookup, mut calls) = (None, 0);
+            let (t, mask) = loop {
+                calls += 1;
+                if let Some(found) = map.transform_step(&p, &mut lookup, &mut cache, 1).unwrap() {
+                    break found;
+                }
+            };
+            let (direct, residual) = map.transform_with_residual(&p).unwrap();
+            assert_eq!(t, direct);
+            assert_eq!(map.residual(&t, mask), residual);
+            let widenings = (mask.count_ones() - map.neighbourhood(&p).count_ones()) as usize;
+            assert_eq!(calls, widenings + 2, "{p}");
+            assert_eq!(lookup, None);
+            // Now cached: one call, same transform and neighbourhood.
+            let again = map.transform_step(&p, &mut lookup, &mut cache, 1).unwrap();
+            assert_eq!(again, Some((t, mask)));
+            assert_eq!((cache.fits, cache.hits), (1, 1));
+        }
+    }
+
     #[test]
     fn full_cache_starts_over_and_counts() {
         let src = skeleton();
