@@ -16,11 +16,15 @@
 //!   refused (wrong state, bad content) is NACKed with its own number and
 //!   [`NackCode::BadState`] / [`NackCode::Invalid`]: it counts as handled, the host must
 //!   not re-send it.
-//! * **Sweep**: poses and frames go into a [`Compounder`] (lag-corrected poses).
-//! * **Registration** runs in [`Controller::poll`] in bounded steps — the voxel
-//!   centroids ([`VOXELS_FINISHED_PER_POLL`] a call), then [`SOM_ITERATIONS_PER_POLL`]
-//!   units of registration work a call (see [`Registering`]), then one waypoint a call —
-//!   so pose handling between calls is never starved; the mapped waypoints become probe
+//! * **Sweep**: poses and frames go into a [`Compounder`] (lag-corrected poses); a frame
+//!   message only places its points in a queue, [`Controller::poll`] moves them into the
+//!   voxel cloud ([`SWEEP_WORK_PER_POLL`] a call).
+//! * **Registration** runs in [`Controller::poll`] in bounded steps — the last queued
+//!   sweep points, the voxel centroids ([`VOXELS_FINISHED_PER_POLL`] a call), then
+//!   [`SOM_ITERATIONS_PER_POLL`] units of registration work a call (see [`Registering`]),
+//!   then each waypoint's transform (widening, fit) and probe pose in calls of their own —
+//!   so pose handling between calls is never starved (on the emulated Cortex-M4F no call
+//!   exceeds 139 k instructions, README); the mapped waypoints become probe
 //!   targets (on the skin side of the local bone surface, beam
 //!   along its inward normal, footprint along the gap) and are reported with a quality
 //!   figure (the local rigid fit's RMS residual).
@@ -69,8 +73,8 @@ pub const DWELL_US: u64 = 500_000;
 /// a step near 0.1 M instructions (README, "Controller and firmware").
 pub const SOM_ITERATIONS_PER_POLL: u32 = 8;
 /// Voxels turned into centroids per [`Controller::poll`] before the registration starts:
-/// ~1,800 instructions each on the emulated Cortex-M4F (10 calls of 96 took 1.79 M, the
-/// worst 187 k), so 64 stay near 120 k.
+/// ~1,800 instructions each on the emulated Cortex-M4F (865 voxels: 14 calls of 64,
+/// 1.79 M in all, the worst 125 k; the registration's set-up is a call of its own).
 pub const VOXELS_FINISHED_PER_POLL: usize = 64;
 /// Work ([`crate::compound::VoxelCloud::work`], ~20 instructions a unit) spent per
 /// [`Controller::poll`] moving queued sweep points into the voxel cloud (a frame message

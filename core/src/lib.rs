@@ -14,11 +14,12 @@
 //! US→CT endpoint matching by ICP → [`skeleton`] tree paths, Eq. 4 turn filter → [`fit`]
 //! cubics and resampling (6/6/8/10 points) → [`local_rigid`] per-point Kabsch
 //! ([`kabsch`]) over the N_r = 10 nearest skeleton pairs → [`metrics`] ED and Hausdorff.
+//! Nearest-node queries over SOM node sets use exact k-d trees ([`kdtree`]).
 //! [`pipeline`] strings them together; [`pipeline::Config::default`] is the paper's
 //! method, [`pipeline::Config::improved`] replaces the SOM-2 / MST / endpoint stage by
 //! ribs carried over from the labelled template ([`guided`]), which the README's phantom
 //! evaluation shows the published stage needs. One registration's working state is about
-//! 38 KiB (README, "Performance and memory").
+//! 37 KiB (README, "Performance and memory").
 //!
 //! The US cloud itself is built from a robot-tracked sweep: [`probe`] spatial calibration
 //! (paper Eq. 1), [`temporal`] lag estimation by normalised cross-correlation, [`track`]

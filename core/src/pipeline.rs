@@ -231,9 +231,10 @@ pub fn register(template: &Template, target: &[Vec3], cfg: &Config) -> Result<Re
 
 /// A registration in progress, for callers that must bound the work per call (the
 /// controller's 100 Hz loop): every [`Registering::step`] does at most `budget` units of
-/// work — a unit is one SOM iteration or one nearest-neighbour scan of a node set (the
-/// dead-unit scans, the guided model's ICP pairings, labels and rib-fit points, see
-/// [`TargetSkeleton`]) or one rigid fit — and a stage change is a call of its own. The
+/// work — a unit is one SOM iteration, one nearest-neighbour scan of a node set (the
+/// dead-unit scans) or about as much work in the guided model (k-d tree queries for ICP
+/// pairings, labels and rib-fit points, tree building, neighbourhood widening, see
+/// [`TargetSkeleton`]), or one rigid fit — and a stage change is a call of its own. The
 /// graph model's endpoint matching and the mapping's set-up take one call each. The
 /// result equals [`register`]'s and is kept inside (nothing of kilobytes passes through
 /// the caller's stack).
