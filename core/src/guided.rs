@@ -246,7 +246,8 @@ pub enum GuidedStage {
 /// of work, a unit being about one scan of a node set ([`SOM1_CAPACITY`] distances, about
 /// as much as one SOM iteration): [`QUERIES_PER_UNIT`] nearest-node queries of a k-d tree
 /// ([`crate::kdtree`]) with what goes with them, [`SPLITS_PER_UNIT`] points partitioned
-/// while building a tree, or one rigid fit; a stage change is a call of its own. The
+/// while building a tree, [`FIT_POINTS_PER_UNIT`] rib-fit points, one widening of a
+/// carried node's neighbourhood, or one rigid fit; a stage change is a call of its own. The
 /// state lives here (about 13 KiB: the carried nodes, labels, three node trees, the
 /// mapping's transform cache), not on the stack. [`crate::pipeline::register`] runs it to
 /// the end.
@@ -289,9 +290,10 @@ pub const SPLITS_PER_UNIT: usize = 48;
 /// power sums are soft-float on the Cortex-M4F: ~4,000 instructions a point).
 pub const FIT_POINTS_PER_UNIT: usize = 3;
 
-/// Transform cache of the carried-node mapping: 64 entries × ~60 B ≈ 3.8 KiB. A full
-/// cache only refits (see [`TransformCache`]); with 16 entries the carry refitted at
-/// almost every node and cost 76 M instructions on the emulated controller.
+/// Transform cache of the carried-node mapping: 64 entries × ~64 B ≈ 4 KiB. A full cache
+/// starts over (see [`TransformCache`]). On the emulated controller the carried nodes
+/// cost 76 M instructions with 16 entries that kept nothing new once full, 43 M with 64
+/// such entries, 28.5 M with 64 that start over.
 pub const CARRY_CACHE: usize = 64;
 
 impl TargetSkeleton {
