@@ -8,10 +8,11 @@
 //! it is polled every turn, its poll is small and keeps the setpoints' clock). A turn
 //! after one that took a frame only polls, so under a burst of messages the two
 //! alternate. Then it sends the replies. So a turn makes one bounded controller call,
-//! whatever the host sent meanwhile (the rest waits in the link). When there is nothing to do (not registering, not executing, no
-//! byte waiting) it sleeps in WFI until a byte arrives. Every call is measured in
-//! instructions with SysTick (`-icount shift=0`: 40 per tick) and the worst cases and the
-//! registration's total are reported on `Command::Cost`.
+//! whatever the host sent meanwhile (the rest waits in the link). When there is nothing
+//! to do (`Controller::busy` false, not executing, no byte waiting) it sleeps in WFI until
+//! a byte arrives. Every call is measured in instructions with SysTick (`-icount
+//! shift=0`: 40 per tick); the worst cases and the registration's total are reported on
+//! `Command::Cost`, calls and turns above 1 ms at 168 MHz are logged as they happen.
 //!
 //! A frame whose bytes are exactly `QUIT` (never valid COBS) ends the run: the firmware
 //! logs its measurements through defmt and exits the emulator with success.
