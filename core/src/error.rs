@@ -59,7 +59,7 @@ pub enum Error {
         /// Index of the offending point.
         index: u32,
     },
-    /// A coordinate is beyond [`crate::MAX_COORD_MM`] in magnitude.
+    /// A coordinate is beyond [`crate::limits::MAX_COORD_MM`] in magnitude.
     OutOfRange {
         /// Which cloud.
         cloud: Cloud,
@@ -213,7 +213,7 @@ impl fmt::Display for Error {
             Error::OutOfRange { cloud, index } => write!(
                 f,
                 "{cloud} point {index} has a coordinate beyond ±{} mm",
-                crate::MAX_COORD_MM
+                crate::limits::MAX_COORD_MM
             ),
             Error::Degenerate { cloud, spread_mm } => write!(
                 f,

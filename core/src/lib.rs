@@ -8,30 +8,48 @@
 //! without allocation, with fixed capacities: the same code runs on the host and on the
 //! Cortex-M4F probe-positioning controller.
 //!
-//! Pipeline (one module each):
-//! [`rng`] seeded sampling → [`som`] SOM 1 (20×20) and SOM 2 (5×8) → [`mst`] Prim's tree
-//! → [`hull`] gift-wrapping hull and the endpoint rule in [`skeleton`] → [`endpoints`]
-//! US→CT endpoint matching by ICP → [`skeleton`] tree paths, Eq. 4 turn filter → [`fit`]
-//! cubics and resampling (6/6/8/10 points) → [`local_rigid`] per-point Kabsch
-//! ([`kabsch`]) over the N_r = 10 nearest skeleton pairs → [`metrics`] ED and Hausdorff.
-//! Nearest-node queries over SOM node sets use exact k-d trees ([`kdtree`]).
-//! [`pipeline`] strings them together; [`pipeline::Config::default`] is the paper's
-//! method, [`pipeline::Config::improved`] replaces the SOM-2 / MST / endpoint stage by
-//! ribs carried over from the labelled template ([`guided`]), which the README's phantom
-//! evaluation shows the published stage needs. One registration's working state is about
-//! 37 KiB (README, "Performance and memory").
+//! # Layers
+//! The crate is one folder per concern; each `mod.rs` opens with its contract. Layers
+//! import one way only, downward (checked by `tests/tests/layers.rs`):
 //!
-//! The US cloud itself is built from a robot-tracked sweep: [`probe`] spatial calibration
-//! (paper Eq. 1), [`temporal`] lag estimation by normalised cross-correlation, [`track`]
-//! pose window with lerp/slerp interpolation, [`compound`] bounded voxel compounding.
+//! ```text
+//! controller                       state machine, link layer, motion, probe targets
+//!     │
+//! wire                             versioned messages, COBS/CRC-32 framing
+//!     │
+//! registration   acquisition       the method (steps 4–10) │ sweep → US cloud (steps 1–2)
+//!     │               │
+//! math                             geometry, sampling, Kabsch, fits, hull, MST, k-d tree, SOM
+//!     │
+//! limits · error · config          capacities │ typed errors │ the method's parameters
+//! ```
 //!
-//! The controller that runs all this on the Cortex-M4F is [`controller`] (a host-testable
-//! state machine: upload, sweep, registration in bounded steps, setpoints, pose
-//! watchdog), speaking the versioned, COBS/CRC-32 framed protocol of [`wire`].
+//! * [`limits`]: every capacity and size bound; [`error`]: the one error type; [`config`]:
+//!   [`config::Config`] (paper defaults), the rib model, the SOM schedules.
+//! * [`math`]: [`math::rng`] seeded sampling, [`math::som`] SOM 1 (20×20) and SOM 2
+//!   (5×8), [`math::mst`] Prim's tree, [`math::hull`] gift wrapping, [`math::kabsch`],
+//!   [`math::fit`] cubics, [`math::kdtree`] exact nearest-node queries, [`math::geom`].
+//! * [`registration`]: [`registration::skeleton`] endpoint rule, tree paths and the Eq. 4
+//!   turn filter → [`registration::endpoints`] US→CT endpoint matching by ICP →
+//!   [`registration::local_rigid`] per-point Kabsch over the N_r = 10 nearest skeleton
+//!   pairs → [`registration::metrics`] ED and Hausdorff; [`registration::pipeline`]
+//!   strings them together. [`config::Config::default`] is the paper's method,
+//!   [`config::Config::improved`] carries the ribs over from the labelled template
+//!   ([`registration::guided`]) on its probe-facing surface
+//!   ([`registration::anterior`]). One registration's working state is about 37 KiB
+//!   (README, "Performance and memory"; bounded by [`limits::MAX_WORKING_STATE`]).
+//! * [`acquisition`]: [`acquisition::probe`] spatial calibration (paper Eq. 1),
+//!   [`acquisition::temporal`] lag estimation, [`acquisition::track`] pose window with
+//!   lerp/slerp, [`acquisition::compound`] bounded voxel compounding.
+//! * [`wire`]: the protocol both sides share, a leaf above the method's types.
+//! * [`controller`]: the host-testable state machine the firmware runs (upload, sweep,
+//!   registration in bounded steps, setpoints, pose watchdog).
 //!
 //! ```
-//! use ribreg_core::{pipeline::{register, Config, Template}, local_rigid::TransformCache, Vec3};
-//! # fn cage() -> Vec<Vec3> { ribreg_core::example::cage(0.0).collect() }
+//! use ribreg_core::config::Config;
+//! use ribreg_core::registration::{local_rigid::TransformCache, pipeline::{register, Template}};
+//! use ribreg_core::Vec3;
+//! # fn cage() -> Vec<Vec3> { ribreg_core::registration::example::cage(0.0).collect() }
 //! let ct: Vec<Vec3> = cage();                       // template, patient frame
 //! let us: Vec<Vec3> = cage().iter().map(|p| p + Vec3::new(3.0, -2.0, 10.0)).collect();
 //! let cfg = Config::default();
@@ -45,36 +63,18 @@
 //!
 //! No input makes the core panic: every failure is an [`Error`] that says what was
 //! found and what was expected. Clouds are borrowed, never copied: their size is bounded
-//! only by [`pipeline::MAX_CLOUD_POINTS`].
+//! only by [`limits::MAX_CLOUD_POINTS`].
 
-pub mod compound;
+pub mod acquisition;
+pub mod config;
 pub mod controller;
-pub mod endpoints;
 pub mod error;
-pub mod example;
-pub mod fit;
-pub mod geom;
-pub mod guided;
-pub mod hull;
-pub mod kabsch;
-pub mod kdtree;
-pub mod local_rigid;
-pub mod metrics;
-pub mod mst;
-pub mod pipeline;
-pub mod probe;
-pub mod rng;
-pub mod skeleton;
-pub mod som;
-pub mod temporal;
-pub mod track;
+pub mod limits;
+pub mod math;
+pub mod registration;
 pub mod wire;
 
 pub use error::{Error, Result, Stream};
 
 /// A point or vector in millimetres.
 pub type Vec3 = nalgebra::Vector3<f32>;
-
-/// Largest coordinate magnitude accepted, mm (100 m: beyond it a cloud is not in mm, and
-/// squared distances would lose all precision in `f32`).
-pub const MAX_COORD_MM: f32 = 1.0e5;

@@ -63,7 +63,8 @@ mod app {
     use cortex_m_semihosting::debug;
     use defmt_semihosting as _;
     use embedded_io::{Read, ReadReady, Write};
-    use ribreg_core::controller::{Controller, CONTROLLER_VOXELS};
+    use ribreg_core::controller::Controller;
+    use ribreg_core::limits::CONTROLLER_VOXELS;
     use ribreg_core::wire::{self, CostW, State};
 
     defmt::timestamp!("{=u64}", cost::now_ticks());

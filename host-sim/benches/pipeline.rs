@@ -4,10 +4,12 @@
 //! Run: `cargo bench -p ribreg-sim --bench pipeline`.
 
 use criterion::{criterion_group, criterion_main, Criterion};
+use ribreg_core::config::Config;
 use ribreg_core::error::Cloud as Which;
-use ribreg_core::local_rigid::TransformCache;
-use ribreg_core::pipeline::{register, Config, Template};
-use ribreg_core::skeleton::SkeletonGraph;
+use ribreg_core::limits::{TRACK_CAPACITY, VOXEL_CAPACITY};
+use ribreg_core::registration::local_rigid::TransformCache;
+use ribreg_core::registration::pipeline::{register, Template};
+use ribreg_core::registration::skeleton::SkeletonGraph;
 use ribreg_core::Vec3;
 use ribreg_sim::phantom::{PhantomConfig, PhantomPair};
 use ribreg_sim::register::{register_clouds, to_core, Method, HOST_CACHE};
@@ -78,11 +80,11 @@ fn benches(c: &mut Criterion) {
 /// (96 bone pixels, the most a 384-pixel image annotated every 4th column has) into a
 /// voxel cloud already holding a whole chest, and one temporal calibration (20 s sweep).
 fn sweep_benches(c: &mut Criterion) {
-    use ribreg_core::compound::{
-        Compounder, DEFAULT_MAX_COARSENINGS, DEFAULT_VOXEL_MM, VOXEL_CAPACITY,
+    use ribreg_core::acquisition::compound::{
+        Compounder, DEFAULT_MAX_COARSENINGS, DEFAULT_VOXEL_MM,
     };
-    use ribreg_core::temporal::calibrate;
-    use ribreg_core::track::{TrackedPose, TRACK_CAPACITY};
+    use ribreg_core::acquisition::temporal::calibrate;
+    use ribreg_core::acquisition::track::TrackedPose;
     use ribreg_sim::sweep::{self, SweepConfig};
 
     let logs = sweep::simulate(&PhantomConfig::default(), &SweepConfig::default()).unwrap();

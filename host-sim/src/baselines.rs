@@ -469,7 +469,7 @@ pub fn seeded_subsample(len: usize, n: usize, seed: u64) -> Vec<usize> {
     if len <= n {
         return idx;
     }
-    let mut rng = ribreg_core::rng::Rng::new(seed);
+    let mut rng = ribreg_core::math::rng::Rng::new(seed);
     for i in 0..n {
         // `below` takes u32; clouds here are far below 2^32 points.
         let span = u32::try_from(len - i).unwrap_or(u32::MAX);

@@ -10,7 +10,7 @@ use crate::plot::{self, Series};
 use crate::register::{register_clouds, to_core, to_file, CliError, Method};
 use crate::stats::{paired_t_test, Summary};
 use ribreg_core::error::Cloud as Which;
-use ribreg_core::metrics::compare;
+use ribreg_core::registration::metrics::compare;
 use ribreg_core::Vec3;
 use serde_json::{json, Value};
 use std::fmt::Write as _;

@@ -22,14 +22,15 @@
 //! checks that the controller's counters of applied poses and frames equal those of the
 //! fault-free stream, and the mapped waypoints are compared with a fault-free run.
 
+use ribreg_core::limits::CONTROLLER_VOXELS;
 use std::collections::VecDeque;
 use std::io::{Read, Write};
 use std::time::{Duration, Instant};
 
-use ribreg_core::controller::{Controller, CONTROLLER_VOXELS, CONTROLLER_VOXEL_MM};
-use ribreg_core::geom::Rigid;
-use ribreg_core::rng::Rng;
-use ribreg_core::track::TrackedPose;
+use ribreg_core::acquisition::track::TrackedPose;
+use ribreg_core::controller::{Controller, CONTROLLER_VOXEL_MM};
+use ribreg_core::math::geom::Rigid;
+use ribreg_core::math::rng::Rng;
 use ribreg_core::wire::{
     self, Command, Configure, CostW, FrameW, FromController, NackCode, Node, PoseW, State,
     TemplateShape, ToController, WaypointW, MAGIC, MAX_FRAME, NODES_PER_CHUNK, PIXEL_SUBDIVISIONS,
@@ -638,7 +639,7 @@ pub fn run_with<P: Port>(
     let logs = sweep::simulate(phantom, &options.sweep)?;
     let pair = &logs.pair;
     let (tr, vi) = sweep::calibration_samples(&logs.calib_tracker, &logs.calib_video);
-    let lag = ribreg_core::temporal::calibrate(&tr, &vi)?;
+    let lag = ribreg_core::acquisition::temporal::calibrate(&tr, &vi)?;
     progress(&format!(
         "temporal calibration: lag {:.1} ms",
         lag.lag_s * 1e3

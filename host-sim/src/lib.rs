@@ -8,7 +8,6 @@ pub mod hil;
 pub mod io;
 pub mod phantom;
 pub mod plot;
-pub mod prep;
 pub mod qemu;
 pub mod register;
 pub mod sample;

@@ -116,7 +116,7 @@ enum Command {
         #[arg(long)]
         lag_file: Option<PathBuf>,
         /// Finest voxel edge of the down-sampling, mm (the grid coarsens if it fills up).
-        #[arg(long, default_value_t = ribreg_core::compound::DEFAULT_VOXEL_MM)]
+        #[arg(long, default_value_t = ribreg_core::acquisition::compound::DEFAULT_VOXEL_MM)]
         voxel_mm: f32,
         /// Output cloud (PLY, binary little-endian), robot base frame.
         #[arg(short, long)]
@@ -462,7 +462,11 @@ fn run_sweep_demo(
 ) -> Result<(), CliError> {
     let cfg = SweepConfig::default();
     run_phantom_sweep(phantom, &cfg, out_dir, progress)?;
-    let r = sweep::end_to_end(out_dir, ribreg_core::compound::DEFAULT_VOXEL_MM, progress)?;
+    let r = sweep::end_to_end(
+        out_dir,
+        ribreg_core::acquisition::compound::DEFAULT_VOXEL_MM,
+        progress,
+    )?;
     let json = r.json(cfg.lag_ms);
     let text = serde_json::to_string_pretty(&json).map_err(|e| CliError::Usage(e.to_string()))?;
     ribreg_sim::io::write_text(&out_dir.join("end_to_end.json"), &text)?;

@@ -87,7 +87,7 @@
 
 use std::f64::consts::TAU;
 
-use ribreg_core::rng::Rng;
+use ribreg_core::math::rng::Rng;
 use serde::{Deserialize, Serialize};
 
 mod geometry;

@@ -7,13 +7,15 @@
 //! under a second, see the README).
 
 use crate::io::{self, Cloud, IoError, PlyFormat};
-use crate::prep;
+use ribreg_core::config::{Config, RIBS, RIB_SAMPLES};
 use ribreg_core::error::Cloud as Which;
-use ribreg_core::local_rigid::TransformCache;
-use ribreg_core::metrics::{compare, Metrics};
-use ribreg_core::pipeline::{register, Config, Registration, Template};
-use ribreg_core::skeleton::{RIBS, RIB_SAMPLES};
-use ribreg_core::{Error, Vec3, MAX_COORD_MM};
+use ribreg_core::registration::anterior;
+use ribreg_core::registration::local_rigid::TransformCache;
+use ribreg_core::registration::metrics::{compare, Metrics};
+use ribreg_core::registration::pipeline::{register, Registration, Template};
+
+use ribreg_core::limits::MAX_COORD_MM;
+use ribreg_core::{Error, Vec3};
 use serde_json::{json, Value};
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -25,7 +27,7 @@ pub enum Method {
     /// The paper's method as published (graph rib model, whole template surface).
     Paper,
     /// The paper's method with this project's improvements: guided rib model and an
-    /// anterior-surface template (ribreg_core::guided, ribreg_sim::prep). Needs a
+    /// anterior-surface template (ribreg_core::registration::guided, ribreg_core::registration::anterior). Needs a
     /// labelled template.
     #[default]
     Improved,
@@ -187,7 +189,7 @@ pub struct RegisterOutcome {
 }
 
 /// The template `method` registers with: the whole cloud for the paper's method; for the
-/// improved one, only its probe-facing points ([`prep::anterior_mask`]), labels needed.
+/// improved one, only its probe-facing points ([`anterior::anterior_mask`]), labels needed.
 pub fn build_template(
     template: &[Vec3],
     labels: Option<&[u8]>,
@@ -198,7 +200,9 @@ pub fn build_template(
     match method {
         Method::Paper => Template::build(template, labels, cfg),
         Method::Improved => {
-            let mask = prep::anterior_mask(template);
+            let mut mask = vec![false; template.len()];
+            let mut cells = vec![anterior::Cell::default(); template.len()];
+            anterior::anterior_mask(template, &mut cells, &mut mask)?;
             let keep = |i: usize| mask[i];
             let front: Vec<Vec3> = (0..template.len())
                 .filter(|&i| keep(i))

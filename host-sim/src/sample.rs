@@ -10,7 +10,7 @@
 
 use crate::io::Mesh;
 use crate::phantom::sampling::dart_throw;
-use ribreg_core::rng::Rng;
+use ribreg_core::math::rng::Rng;
 
 /// Candidates per `spacing²` of surface: enough that the kept set is close to maximal.
 pub const CANDIDATES_PER_DISC: f64 = 12.0;

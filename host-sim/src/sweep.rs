@@ -9,7 +9,7 @@
 //!     "tcp_T_us": { "rotation": [[1,0,0],[0,0,-1],[0,1,0]], "translation": [-19.2,0,0] },
 //!     "ee_T_tcp": { "rotation": [[1,0,0],[0,1,0],[0,0,1]], "translation": [0,0,165] } }
 //!   ```
-//!   Rotations row-major, translations mm; frames as in [`ribreg_core::probe`].
+//!   Rotations row-major, translations mm; frames as in [`ribreg_core::acquisition::probe`].
 //! * `poses.csv` — `t,x,y,z,qw,qx,qy,qz`: flange pose `b_T_ee` (s, mm, unit quaternion)
 //!   at ~100 Hz, tracker clock.
 //! * `frames.csv` — `frame,t,u,v`: one annotated bone pixel a line (frame number, video
@@ -18,16 +18,19 @@
 //! * `calib_tracker.csv` — `t,x,y,z` (TCP positions of the calibration sweep, ~100 Hz);
 //!   `calib_video.csv` — `t,row` (landmark row per frame, ~30 fps).
 
+use ribreg_core::limits::TRACK_CAPACITY;
 use std::collections::BTreeMap;
 use std::path::Path;
 
 use nalgebra::{Isometry3, Matrix3, Vector3};
-use ribreg_core::compound::{Compounder, FrameStats, VoxelStats, DEFAULT_MAX_COARSENINGS};
-use ribreg_core::geom::Rigid;
-use ribreg_core::probe::{Calibration, ProbeModel};
-use ribreg_core::rng::Rng;
-use ribreg_core::temporal::{self, LagEstimate, TrackerSample, VideoSample};
-use ribreg_core::track::{TrackedPose, TRACK_CAPACITY};
+use ribreg_core::acquisition::compound::{
+    Compounder, FrameStats, VoxelStats, DEFAULT_MAX_COARSENINGS,
+};
+use ribreg_core::acquisition::probe::{Calibration, ProbeModel};
+use ribreg_core::acquisition::temporal::{self, LagEstimate, TrackerSample, VideoSample};
+use ribreg_core::acquisition::track::TrackedPose;
+use ribreg_core::math::geom::Rigid;
+use ribreg_core::math::rng::Rng;
 use ribreg_core::{Error, Vec3};
 use serde::{Deserialize, Serialize};
 
@@ -39,7 +42,7 @@ pub(crate) mod sim;
 
 /// Voxel capacity of host compounding: 8192 × 24 B = 192 KiB, enough for a whole-chest
 /// sweep at 2 mm (the phantom sweeps fill 5,500–7,900 voxels; larger ones coarsen to 4 mm). The controller keeps
-/// [`ribreg_core::compound::VOXEL_CAPACITY`] (2048) and coarsens to 4 mm instead.
+/// [`ribreg_core::limits::VOXEL_CAPACITY`] (2048) and coarsens to 4 mm instead.
 pub const HOST_VOXEL_CAPACITY: usize = 8192;
 
 /// Columns of `poses.csv`.

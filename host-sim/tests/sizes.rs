@@ -3,11 +3,12 @@
 //! state under 64 KiB.
 
 use core::mem::size_of;
-use ribreg_core::guided::{NodeTree, TargetSkeleton};
-use ribreg_core::local_rigid::{TransformCache, CACHE_CAPACITY};
-use ribreg_core::pipeline::{Registering, Registration, Template};
-use ribreg_core::skeleton::{SkeletonGraph, SOM1_CAPACITY};
-use ribreg_core::som::Som;
+use ribreg_core::limits::{CACHE_CAPACITY, SOM1_CAPACITY, TRACK_CAPACITY, VOXEL_CAPACITY};
+use ribreg_core::math::som::Som;
+use ribreg_core::registration::guided::{NodeTree, TargetSkeleton};
+use ribreg_core::registration::local_rigid::TransformCache;
+use ribreg_core::registration::pipeline::{Registering, Registration, Template};
+use ribreg_core::registration::skeleton::SkeletonGraph;
 
 #[test]
 fn working_state_fits_64_kib() {
@@ -52,21 +53,22 @@ fn working_state_fits_64_kib() {
     let total = size_of::<Template>()
         + size_of::<Registering>().max(size_of::<Registration>())
         + size_of::<TransformCache<CACHE_CAPACITY>>();
+    assert_eq!(total, ribreg_core::registration::WORKING_STATE);
     println!(
         "{:50} {:6} B  {:5.1} KiB",
         "total (template + registering + mapping cache)",
         total,
         total as f64 / 1024.0
     );
-    assert!(total < 64 * 1024);
+    assert!(total <= ribreg_core::limits::MAX_WORKING_STATE);
 }
 
 /// The sweep state the controller keeps while compounding (pose window + voxel cloud);
 /// its finished cloud is the registration's target, so it is live beside the state above.
 #[test]
 fn sweep_state_fits_64_kib() {
-    use ribreg_core::compound::{Compounder, VoxelCloud, VOXEL_CAPACITY};
-    use ribreg_core::track::{PoseTrack, TRACK_CAPACITY};
+    use ribreg_core::acquisition::compound::{Compounder, VoxelCloud};
+    use ribreg_core::acquisition::track::PoseTrack;
     let rows = [
         (
             "PoseTrack<128> (1.28 s at 100 Hz)",

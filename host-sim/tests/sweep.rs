@@ -1,7 +1,7 @@
 //! The robotic-US chain of issue 4: temporal calibration accuracy, the `calibrate`,
 //! `phantom sweep` and `compound` commands end to end into `register`, and bad logs.
 
-use ribreg_core::temporal::calibrate;
+use ribreg_core::acquisition::temporal::calibrate;
 use ribreg_sim::io;
 use ribreg_sim::phantom::PhantomConfig;
 use ribreg_sim::sweep::{self, SweepConfig};

@@ -2,7 +2,7 @@
 //! and its waypoints, rigid motions, and tolerance checks.
 
 use crate::reference::{self as r, P3};
-use ribreg_core::geom::Rigid;
+use ribreg_core::math::geom::Rigid;
 use ribreg_core::Vec3;
 
 /// `f32` point → `f64`.
@@ -30,9 +30,9 @@ pub fn dist_mixed(a: &Vec3, b: P3) -> f64 {
     r::dist(to64(a), b)
 }
 
-/// The built-in cage `ribreg_core::example::cage(stretch)`.
+/// The built-in cage `ribreg_core::registration::example::cage(stretch)`.
 pub fn cage(stretch: f32) -> Vec<Vec3> {
-    ribreg_core::example::cage(stretch).collect()
+    ribreg_core::registration::example::cage(stretch).collect()
 }
 
 /// Cartilage lengths of the built-in cage, ribs 2..5 (mm; copied from `core/src/example.rs`).
@@ -56,7 +56,7 @@ pub fn cage_labels(stretch: f32) -> Vec<u8> {
     }
     assert_eq!(
         labels.len(),
-        ribreg_core::example::cage(stretch).count(),
+        ribreg_core::registration::example::cage(stretch).count(),
         "cage layout changed"
     );
     labels
@@ -128,8 +128,9 @@ pub fn rigid_to64(t: &Rigid) -> r::Rigid {
 }
 
 /// The reference frame → a core frame (`f32`).
-pub fn frame_to32(f: &r::Frame) -> ribreg_core::geom::Frame {
-    let mut out = ribreg_core::geom::Frame::principal(&[Vec3::zeros()], 0).expect("one point");
+pub fn frame_to32(f: &r::Frame) -> ribreg_core::math::geom::Frame {
+    let mut out =
+        ribreg_core::math::geom::Frame::principal(&[Vec3::zeros()], 0).expect("one point");
     out.origin = to32(f.origin);
     for k in 0..3 {
         for i in 0..3 {
@@ -141,7 +142,7 @@ pub fn frame_to32(f: &r::Frame) -> ribreg_core::geom::Frame {
 }
 
 /// A core frame → `f64`.
-pub fn frame_to64(f: &ribreg_core::geom::Frame) -> r::Frame {
+pub fn frame_to64(f: &ribreg_core::math::geom::Frame) -> r::Frame {
     r::Frame {
         origin: to64(&f.origin),
         axes: std::array::from_fn(|k| std::array::from_fn(|i| f64::from(f.axes[(i, k)]))),
@@ -217,7 +218,7 @@ pub fn skeleton_like(seed: u64) -> Vec<P3> {
 /// nodes converted exactly, the core's frame and endpoints; the tree is the reference's
 /// Prim on the same key points and the hull the reference's gift wrapping (use
 /// [`core_edges`] to check that the trees agree).
-pub fn graph_to_ref(g: &ribreg_core::skeleton::SkeletonGraph) -> r::Graph {
+pub fn graph_to_ref(g: &ribreg_core::registration::skeleton::SkeletonGraph) -> r::Graph {
     let key_points = cloud64(&g.key_points);
     let tree = r::Tree::prim(&key_points);
     let frame = frame_to64(&g.frame);
@@ -264,7 +265,7 @@ pub fn ref_error(e: ribreg_core::Error) -> r::RefError {
 }
 
 /// Edges of a core tree as sorted `(min, max)` pairs.
-pub fn core_edges<const N: usize>(t: &ribreg_core::mst::Tree<N>) -> Vec<(usize, usize)> {
+pub fn core_edges<const N: usize>(t: &ribreg_core::math::mst::Tree<N>) -> Vec<(usize, usize)> {
     let mut e: Vec<(usize, usize)> = t.edges().map(|(a, b)| (a.min(b), a.max(b))).collect();
     e.sort_unstable();
     e

@@ -5,15 +5,17 @@
 //! (`LocalRigid::map_in_place`), and the kernels `kabsch::fit`, `mst::Tree::prim`,
 //! `fit::Poly::fit`, `hull::gift_wrap`, `metrics::compare`.
 
+use ribreg_core::config::Config;
+use ribreg_core::config::SomConfig;
 use ribreg_core::error::Cloud;
-use ribreg_core::fit::Poly;
-use ribreg_core::hull::{gift_wrap, Vec2};
-use ribreg_core::local_rigid::TransformCache;
-use ribreg_core::metrics::compare;
-use ribreg_core::mst::Tree;
-use ribreg_core::pipeline::{register, Config, Template, MIN_CLOUD_POINTS};
-use ribreg_core::som::SomConfig;
-use ribreg_core::{kabsch, Error, Vec3};
+use ribreg_core::limits::MIN_CLOUD_POINTS;
+use ribreg_core::math::fit::Poly;
+use ribreg_core::math::hull::{gift_wrap, Vec2};
+use ribreg_core::math::mst::Tree;
+use ribreg_core::registration::local_rigid::TransformCache;
+use ribreg_core::registration::metrics::compare;
+use ribreg_core::registration::pipeline::{register, Template};
+use ribreg_core::{math::kabsch, Error, Vec3};
 use ribreg_tests::support::*;
 use std::sync::OnceLock;
 
@@ -214,7 +216,7 @@ fn collinear_points() {
     let c: Vec<Vec3> = (0..300)
         .map(|i| Vec3::new(i as f32, -2.0 * i as f32, 0.5 * i as f32))
         .collect();
-    let min = ribreg_core::skeleton::MIN_SPREAD_MM;
+    let min = ribreg_core::registration::skeleton::MIN_SPREAD_MM;
     assert!(
         matches!(build(&c), Err(Error::Degenerate { cloud: Cloud::Template, spread_mm }) if spread_mm < min)
     );
@@ -265,7 +267,7 @@ fn only_three_ribs() {
                 cloud: Cloud::Template,
                 rib,
                 found: 0,
-                min: ribreg_core::guided::MIN_RIB_POINTS as u8
+                min: ribreg_core::registration::guided::MIN_RIB_POINTS as u8
             }),
             "rib {rib} dropped, labelled template, guided model"
         );
@@ -332,7 +334,7 @@ fn labels_merging_two_ribs() {
                 cloud: Cloud::Template,
                 rib: from,
                 found: 0,
-                min: ribreg_core::guided::MIN_RIB_POINTS as u8
+                min: ribreg_core::registration::guided::MIN_RIB_POINTS as u8
             }),
             "rib {from} labelled {to}, guided model"
         );

@@ -14,11 +14,11 @@
 //! rotation 1e-4 per element, translation 1e-3 mm).
 //! `cargo test -p ribreg-tests --test golden -- --nocapture` prints the measured errors.
 
-use ribreg_core::fit::{equal_steps, Poly};
-use ribreg_core::hull::{gift_wrap, Vec2};
-use ribreg_core::kabsch;
-use ribreg_core::metrics::{closest_distances, compare, KdTree};
-use ribreg_core::mst::Tree;
+use ribreg_core::math::fit::{equal_steps, Poly};
+use ribreg_core::math::hull::{gift_wrap, Vec2};
+use ribreg_core::math::kabsch;
+use ribreg_core::math::mst::Tree;
+use ribreg_core::registration::metrics::{closest_distances, compare, KdTree};
 use ribreg_tests::reference::{self as r, P3};
 use ribreg_tests::support::*;
 use serde_json::Value;

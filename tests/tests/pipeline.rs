@@ -23,8 +23,9 @@
 //! The brief expected "a few tenths of a mm"; the agreement is one to three orders of
 //! magnitude better. The bound of 0.1 mm keeps a margin of ×3 over the worst case seen.
 
-use ribreg_core::local_rigid::TransformCache;
-use ribreg_core::pipeline::{register, Config, Template};
+use ribreg_core::config::Config;
+use ribreg_core::registration::local_rigid::TransformCache;
+use ribreg_core::registration::pipeline::{register, Template};
 use ribreg_core::Vec3;
 use ribreg_tests::reference as r;
 use ribreg_tests::support::*;
@@ -164,7 +165,7 @@ fn paper_limits_are_reported_and_the_guided_model_covers_the_ribs() {
     // Guided: each rib's 6/6/8/10 points run from one side of the sternum to the other.
     let tpl = Template::build(&cloud, Some(&labels), &Config::improved()).unwrap();
     let mut offset = 0;
-    for (r, n) in ribreg_core::skeleton::RIB_SAMPLES.iter().enumerate() {
+    for (r, n) in ribreg_core::config::RIB_SAMPLES.iter().enumerate() {
         let xs: Vec<f32> = tpl.skeleton.points[offset..offset + n]
             .iter()
             .map(|p| p.x)
@@ -260,7 +261,7 @@ fn template_from_parts_registers_identically() {
 /// Registration in bounded steps (the controller's way) gives exactly `register`'s result.
 #[test]
 fn incremental_registration_equals_register() {
-    use ribreg_core::pipeline::Registering;
+    use ribreg_core::registration::pipeline::Registering;
     let labels = cage_labels(0.0);
     for (cfg, labels) in [
         (Config::improved(), Some(&labels[..])),

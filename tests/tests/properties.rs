@@ -16,12 +16,13 @@
 
 use proptest::prelude::*;
 use proptest::test_runner::{FileFailurePersistence, RngSeed};
-use ribreg_core::geom::{Frame, Rigid};
-use ribreg_core::local_rigid::TransformCache;
-use ribreg_core::mst::Tree;
-use ribreg_core::pipeline::{register, Config, Template};
-use ribreg_core::som::{Som, SomConfig};
-use ribreg_core::{kabsch, Vec3};
+use ribreg_core::config::{Config, SomConfig};
+use ribreg_core::math::geom::{Frame, Rigid};
+use ribreg_core::math::mst::Tree;
+use ribreg_core::math::som::Som;
+use ribreg_core::registration::local_rigid::TransformCache;
+use ribreg_core::registration::pipeline::{register, Template};
+use ribreg_core::{math::kabsch, Vec3};
 use ribreg_tests::reference::{self as r, P3};
 use ribreg_tests::support::*;
 

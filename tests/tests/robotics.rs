@@ -6,10 +6,10 @@
 //! through f32 quaternions: 1e-5 rad. Measured maxima are printed with `--nocapture`.
 
 use nalgebra::{Matrix3, UnitQuaternion};
-use ribreg_core::geom::Rigid as Rigid32;
-use ribreg_core::probe::{Calibration, ProbeModel};
-use ribreg_core::rng::Rng;
-use ribreg_core::track::{PoseTrack, TrackedPose};
+use ribreg_core::acquisition::probe::{Calibration, ProbeModel};
+use ribreg_core::acquisition::track::{PoseTrack, TrackedPose};
+use ribreg_core::math::geom::Rigid as Rigid32;
+use ribreg_core::math::rng::Rng;
 use ribreg_core::Vec3;
 use ribreg_tests::reference::{self as r, Rigid};
 

@@ -9,18 +9,20 @@
 //! (`cargo test -p ribreg-tests --test steps -- --nocapture` prints the measurements).
 //! `ε` below is `f32::EPSILON` = 1.19e-7.
 
-use ribreg_core::endpoints::{best_assignment, match_endpoints};
-use ribreg_core::fit::{equal_steps, Poly};
-use ribreg_core::geom::Frame;
-use ribreg_core::hull::{gift_wrap, Vec2};
-use ribreg_core::local_rigid::{LocalRigid, TransformCache};
-use ribreg_core::metrics::{closest_distances, compare, KdTree};
-use ribreg_core::mst::Tree;
-use ribreg_core::pipeline::{register, Config, Template};
-use ribreg_core::rng::Rng;
-use ribreg_core::skeleton::{turn_filter, RibEnds, RibSkeleton, SkeletonGraph, SKELETON_POINTS};
-use ribreg_core::som::{Som, SomConfig};
-use ribreg_core::{kabsch, Vec3};
+use ribreg_core::config::{Config, SomConfig};
+use ribreg_core::limits::SKELETON_POINTS;
+use ribreg_core::math::fit::{equal_steps, Poly};
+use ribreg_core::math::geom::Frame;
+use ribreg_core::math::hull::{gift_wrap, Vec2};
+use ribreg_core::math::mst::Tree;
+use ribreg_core::math::rng::Rng;
+use ribreg_core::math::som::Som;
+use ribreg_core::registration::endpoints::{best_assignment, match_endpoints};
+use ribreg_core::registration::local_rigid::{LocalRigid, TransformCache};
+use ribreg_core::registration::metrics::{closest_distances, compare, KdTree};
+use ribreg_core::registration::pipeline::{register, Template};
+use ribreg_core::registration::skeleton::{turn_filter, RibEnds, RibSkeleton, SkeletonGraph};
+use ribreg_core::{math::kabsch, Vec3};
 use ribreg_tests::reference::{self as r, P3};
 use ribreg_tests::support::*;
 
@@ -1251,27 +1253,30 @@ fn reference_constants_match_the_core() {
     let cfg = Config::default();
     assert_eq!(cfg.turn_angle_deg, r::TURN_ANGLE_DEG as f32);
     assert_eq!(cfg.neighbours, r::NEIGHBOURS);
-    assert_eq!(ribreg_core::skeleton::RIB_SAMPLES, r::RIB_SAMPLES);
-    assert_eq!(ribreg_core::skeleton::RIBS, r::RIBS);
+    assert_eq!(ribreg_core::config::RIB_SAMPLES, r::RIB_SAMPLES);
+    assert_eq!(ribreg_core::config::RIBS, r::RIBS);
     assert_eq!(
-        ribreg_core::skeleton::LATERAL_FRACTION,
+        ribreg_core::config::LATERAL_FRACTION,
         r::LATERAL_FRACTION as f32
     );
     assert_eq!(
-        ribreg_core::local_rigid::MIN_CROSS_SPREAD,
+        ribreg_core::registration::local_rigid::MIN_CROSS_SPREAD,
         r::MIN_CROSS_SPREAD as f32
     );
-    assert_eq!(ribreg_core::geom::PCA_SAMPLE, r::PCA_SAMPLE);
-    assert_eq!(ribreg_core::som::LIVE_SAMPLES, r::LIVE_SAMPLES);
+    assert_eq!(ribreg_core::math::geom::PCA_SAMPLE, r::PCA_SAMPLE);
+    assert_eq!(ribreg_core::limits::LIVE_SAMPLES, r::LIVE_SAMPLES);
     assert_eq!(
-        ribreg_core::endpoints::COARSE_ITERATIONS,
+        ribreg_core::registration::endpoints::COARSE_ITERATIONS,
         r::COARSE_ITERATIONS
     );
     assert_eq!(
-        ribreg_core::endpoints::ENDPOINT_ITERATIONS,
+        ribreg_core::registration::endpoints::ENDPOINT_ITERATIONS,
         r::ENDPOINT_ITERATIONS
     );
-    assert_eq!(ribreg_core::skeleton::MIN_KEY_POINTS, r::MIN_KEY_POINTS);
+    assert_eq!(
+        ribreg_core::registration::skeleton::MIN_KEY_POINTS,
+        r::MIN_KEY_POINTS
+    );
     // The reference implements the paper's graph rib model only.
-    assert_eq!(cfg.rib_model, ribreg_core::pipeline::RibModel::Graph);
+    assert_eq!(cfg.rib_model, ribreg_core::config::RibModel::Graph);
 }

@@ -49,11 +49,11 @@ use proptest::prelude::*;
 use proptest::sample::{select, Index};
 use proptest::strategy::ValueTree;
 use proptest::test_runner::{FileFailurePersistence, TestRunner};
+use ribreg_core::limits::MAX_FRAME_PIXELS;
 use ribreg_core::wire::{
     self, Command, Configure, CostW, Fault, FrameError, FrameW, FromController, NackCode, Node,
     PoseW, ProbeW, Receiver, SetpointW, State, StatusW, TemplateShape, ToController, WaypointW,
-    MAX_FRAME, MAX_FRAME_PIXELS, MAX_FROM_CONTROLLER, MAX_TO_CONTROLLER, NODES_PER_CHUNK,
-    WAYPOINTS_PER_CHUNK,
+    MAX_FRAME, MAX_FROM_CONTROLLER, MAX_TO_CONTROLLER, NODES_PER_CHUNK, WAYPOINTS_PER_CHUNK,
 };
 use serde::de::DeserializeOwned;
 use serde::Serialize;

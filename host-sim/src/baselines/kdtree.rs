@@ -197,7 +197,7 @@ impl KdTree {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ribreg_core::rng::Rng;
+    use ribreg_core::math::rng::Rng;
 
     fn cloud(n: usize, seed: u64) -> Vec<[f64; 3]> {
         let mut rng = Rng::new(seed);

@@ -2,7 +2,7 @@
 //! The phantom evaluation and the comparison-data export are `#[ignore]`d, see `eval.rs`.
 
 use super::*;
-use ribreg_core::rng::Rng;
+use ribreg_core::math::rng::Rng;
 
 /// A bumpy, asymmetric open surface patch (mm), `n` seeded random points.
 fn surface(n: usize, seed: u64) -> Vec<P3> {

@@ -17,8 +17,8 @@
 //! `τ + lag + jitter` by the video clock (positive lag: the video lags the tracker).
 
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
-use ribreg_core::probe::Calibration;
-use ribreg_core::rng::Rng;
+use ribreg_core::acquisition::probe::Calibration;
+use ribreg_core::math::rng::Rng;
 
 use super::{FrameRow, PoseRow, SweepConfig};
 use crate::phantom::{gaussian, Mesh, SubjectParams};
@@ -26,7 +26,7 @@ use crate::phantom::{gaussian, Mesh, SubjectParams};
 type V3 = Vector3<f64>;
 
 /// `Rigid` (f32) → f64 isometry.
-pub(crate) fn isometry(r: &ribreg_core::geom::Rigid) -> Isometry3<f64> {
+pub(crate) fn isometry(r: &ribreg_core::math::geom::Rigid) -> Isometry3<f64> {
     let m: Matrix3<f64> = r.rotation.cast();
     Isometry3::from_parts(
         Translation3::from(r.translation.cast::<f64>()),
@@ -471,8 +471,8 @@ pub(crate) fn calibration_sweep(
 mod tests {
     use super::*;
     use crate::phantom::SubjectGeometry;
-    use ribreg_core::geom::Rigid;
-    use ribreg_core::probe::ProbeModel;
+    use ribreg_core::acquisition::probe::ProbeModel;
+    use ribreg_core::math::geom::Rigid;
 
     #[test]
     fn skin_normal_is_perpendicular_to_the_surface() {

@@ -8,7 +8,7 @@
 //! than [`MAX_TRACK_GAP_MS`] apart ([`Error::TrackGap`]: the robot stream dropped out).
 
 use crate::error::{Error, Result, Stream};
-use crate::geom::Rigid;
+use crate::math::geom::Rigid;
 use crate::Vec3;
 use nalgebra::{Quaternion, Rotation3, UnitQuaternion};
 
@@ -17,9 +17,6 @@ pub const MAX_TRACK_GAP_MS: f32 = 50.0;
 /// Largest deviation of a received quaternion's norm from 1 before it is refused rather
 /// than normalised (a garbled or unnormalised pose, not rounding).
 pub const QUATERNION_NORM_TOLERANCE: f32 = 1e-2;
-/// Pose window of the controller: 128 poses = 1.28 s at 100 Hz, enough for a lag of up
-/// to 0.5 s plus 0.7 s of frame latency. 128 × 40 B = 5 KiB.
-pub const TRACK_CAPACITY: usize = 128;
 
 /// A robot flange pose `b_T_ee` at time `t`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -48,7 +45,7 @@ impl TrackedPose {
                 .iter()
                 .chain(q.coords.iter())
                 .all(|v| v.is_finite());
-        if !finite || position.amax() > crate::MAX_COORD_MM {
+        if !finite || position.amax() > crate::limits::MAX_COORD_MM {
             return Err(bad);
         }
         if (q.norm() - 1.0).abs() > QUATERNION_NORM_TOLERANCE {

@@ -1,8 +1,8 @@
 //! Compounding a tracked sweep into a bounded bone-surface cloud (SPEC pipeline step 1).
 //!
 //! Each annotated frame is placed with the flange pose interpolated at its time minus the
-//! temporal-calibration lag ([`crate::track`]), its bone pixels go through the spatial
-//! calibration ([`crate::probe`]) into the robot base frame, and every point lands in a
+//! temporal-calibration lag ([`crate::acquisition::track`]), its bone pixels go through the spatial
+//! calibration ([`crate::acquisition::probe`]) into the robot base frame, and every point lands in a
 //! [`VoxelCloud`]: a fixed-capacity voxel grid that keeps one centroid per occupied voxel.
 //!
 //! # The voxel cloud
@@ -14,10 +14,11 @@
 //! [`VoxelCloud::max_voxel_mm`]; past it a point needing a new voxel is refused and
 //! counted. Nothing is dropped without a counter: see [`VoxelStats`].
 
+use crate::acquisition::probe::Calibration;
+use crate::acquisition::track::{PoseTrack, TrackedPose};
 use crate::error::{Cloud, Error, Result, Stream};
-use crate::geom::Rigid;
-use crate::probe::Calibration;
-use crate::track::{PoseTrack, TrackedPose};
+use crate::limits::PENDING_POINTS;
+use crate::math::geom::Rigid;
 use crate::Vec3;
 
 /// Bits of each axis index in a Morton code: 3 × 21 = 63 bits.
@@ -25,15 +26,10 @@ const AXIS_BITS: u32 = 21;
 /// Offset making axis indices non-negative: the grid spans ±2²⁰ finest voxels.
 const AXIS_OFFSET: i64 = 1 << (AXIS_BITS - 1);
 /// Smallest finest-voxel edge, mm: 2²⁰ × 0.1 mm ≈ 105 m covers every coordinate within
-/// [`crate::MAX_COORD_MM`].
+/// [`crate::limits::MAX_COORD_MM`].
 pub const MIN_VOXEL_MM: f32 = 0.1;
 /// Coarsenings allowed by default: the voxel edge may grow 8× (e.g. 1.5 → 12 mm).
 pub const DEFAULT_MAX_COARSENINGS: u8 = 3;
-/// A mid-sized voxel capacity (benchmarks, size report): 2048 × 24 B (code 8 + sum 12 +
-/// count 4) = 48 KiB. A whole-chest phantom sweep needs 5,500–7,900 voxels of 2 mm, so
-/// this cloud coarsens once, to 4 mm (about 2,000 voxels). The controller holds fewer,
-/// [`crate::controller::CONTROLLER_VOXELS`] (RAM budget; README).
-pub const VOXEL_CAPACITY: usize = 2048;
 /// [`VoxelCloud::work`] of one inserted point besides the voxels it shifts: its `f64`
 /// voxel arithmetic and binary search cost about 2,500 instructions on the Cortex-M4F.
 pub const INSERT_WORK: u64 = 128;
@@ -160,7 +156,7 @@ impl<const CAP: usize> VoxelCloud<CAP> {
 
     /// Adds a point. `Ok(true)` if kept, `Ok(false)` if refused because the cloud is full
     /// at its coarsest level (counted in [`VoxelStats::refused_full`]). A point that is not
-    /// finite or beyond [`crate::MAX_COORD_MM`] is [`Error::NonFinite`] /
+    /// finite or beyond [`crate::limits::MAX_COORD_MM`] is [`Error::NonFinite`] /
     /// [`Error::OutOfRange`] (cloud `Target`), and after [`VoxelCloud::finish`] every
     /// insert is [`Error::Config`]; the cloud is unchanged then.
     pub fn insert(&mut self, p: &Vec3) -> Result<bool> {
@@ -173,7 +169,7 @@ impl<const CAP: usize> VoxelCloud<CAP> {
                 index: self.stats.accepted,
             });
         }
-        if p.amax() > crate::MAX_COORD_MM {
+        if p.amax() > crate::limits::MAX_COORD_MM {
             return Err(Error::OutOfRange {
                 cloud: Cloud::Target,
                 index: self.stats.accepted,
@@ -333,10 +329,6 @@ pub struct FrameStats {
     pub invalid: u32,
 }
 
-/// Points of placed frames that may wait for the voxel cloud: two full frame messages
-/// (2 × [`crate::wire::MAX_FRAME_PIXELS`] = 192 points × 12 B ≈ 2.3 KiB).
-pub const PENDING_POINTS: usize = 2 * crate::wire::MAX_FRAME_PIXELS;
-
 /// A sweep being compounded: calibration and lag, the pose window and the cloud.
 ///
 /// A frame is placed at once ([`Compounder::queue_frame`]: pose, calibration, checks),
@@ -386,7 +378,7 @@ impl<const POSES: usize, const VOXELS: usize> Compounder<POSES, VOXELS> {
         };
         Compounder {
             calibration: Calibration {
-                probe: crate::probe::ProbeModel {
+                probe: crate::acquisition::probe::ProbeModel {
                     width_px: 1,
                     height_px: 1,
                     footprint_mm: 1.0,
@@ -528,7 +520,9 @@ impl<const POSES: usize, const VOXELS: usize> Compounder<POSES, VOXELS> {
             probe
                 .pixel_to_image(p[0], p[1])
                 .map(|q| b_t_us.apply(&q))
-                .filter(|q| q.iter().all(|v| v.is_finite()) && q.amax() <= crate::MAX_COORD_MM)
+                .filter(|q| {
+                    q.iter().all(|v| v.is_finite()) && q.amax() <= crate::limits::MAX_COORD_MM
+                })
         };
         // All or nothing: a point beyond MAX_COORD_MM (a pose at the edge of the range)
         // refuses the frame before anything is inserted.
@@ -553,7 +547,7 @@ impl<const POSES: usize, const VOXELS: usize> Compounder<POSES, VOXELS> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::probe::ProbeModel;
+    use crate::acquisition::probe::ProbeModel;
     use nalgebra::Matrix3;
 
     #[test]
@@ -600,7 +594,7 @@ mod tests {
     /// A full cloud coarsens exactly: the result equals a cloud built at the coarse size.
     #[test]
     fn coarsening_equals_building_coarse() {
-        let mut rng = crate::rng::Rng::new(5);
+        let mut rng = crate::math::rng::Rng::new(5);
         let pts: std::vec::Vec<Vec3> = (0..3000)
             .map(|_| {
                 Vec3::new(
@@ -717,7 +711,7 @@ mod tests {
             direct.add_pose(pose).unwrap();
             queued.add_pose(pose).unwrap();
         }
-        let mut rng = crate::rng::Rng::new(3);
+        let mut rng = crate::math::rng::Rng::new(3);
         let mut calls = 0;
         for f in 0..30 {
             let pixels: std::vec::Vec<[f32; 2]> = (0..PENDING_POINTS / 3)

@@ -1,5 +1,5 @@
 //! Template-guided rib skeletons — this project's improvement over the paper's
-//! SOM 2 / MST / endpoint stage ([`crate::pipeline::RibModel::Guided`]).
+//! SOM 2 / MST / endpoint stage ([`crate::config::RibModel::Guided`]).
 //!
 //! # Why
 //! The paper finds each rib as the tree path between two of the 8 endpoints of a 40-node
@@ -13,7 +13,7 @@
 //! of the nearest labelled template point. The target's SOM-1 nodes get labels from the
 //! template's:
 //! 1. a rigid pose target → template: the five-start key-point ICP of
-//!    [`crate::endpoints::coarse_pose`] (no initial alignment needed), refined by ICP of
+//!    [`crate::registration::endpoints::coarse_pose`] (no initial alignment needed), refined by ICP of
 //!    all target SOM-1 nodes onto the template's;
 //! 2. the template nodes are carried into the target frame (first by that pose, in later
 //!    rounds by the current local-rigid mapping) and every target node takes the label of
@@ -29,14 +29,16 @@
 //!    template nodes more closely onto the target than a rigid pose can, and their
 //!    Kabsch fit giving the next round's fitting frame.
 
-use crate::endpoints::{CoarsePose, Icp, IcpTree};
+use crate::config::{RIBS, RIB_SAMPLES};
 use crate::error::{Cloud, Error, Result};
-use crate::fit::{equal_steps, PolyFit};
-use crate::geom::{Frame, Rigid};
-use crate::kabsch;
-use crate::kdtree::KdTree;
-use crate::local_rigid::{LocalRigid, Lookup, TransformCache};
-use crate::skeleton::{SkeletonGraph, RIBS, RIB_SAMPLES, SKELETON_POINTS, SOM1_CAPACITY};
+use crate::limits::{CARRY_CACHE, FIT_SAMPLES, SKELETON_POINTS, SOM1_CAPACITY};
+use crate::math::fit::{equal_steps, PolyFit};
+use crate::math::geom::{Frame, Rigid};
+use crate::math::kabsch;
+use crate::math::kdtree::KdTree;
+use crate::registration::endpoints::{CoarsePose, Icp, IcpTree};
+use crate::registration::local_rigid::{LocalRigid, Lookup, TransformCache};
+use crate::registration::skeleton::SkeletonGraph;
 use crate::Vec3;
 
 /// A target node farther than this from every carried template node stays unlabelled, mm.
@@ -55,8 +57,8 @@ pub type NodeLabels = heapless::Vec<u8, SOM1_CAPACITY>;
 pub fn label_nodes(nodes: &[Vec3], cloud: &[Vec3], labels: &[u8]) -> Result<NodeLabels> {
     if labels.len() != cloud.len() {
         return Err(Error::LabelCount {
-            found: crate::geom::sat_u32(labels.len()),
-            expected: crate::geom::sat_u32(cloud.len()),
+            found: crate::math::geom::sat_u32(labels.len()),
+            expected: crate::math::geom::sat_u32(cloud.len()),
         });
     }
     let mut out = NodeLabels::new();
@@ -77,9 +79,6 @@ pub fn label_nodes(nodes: &[Vec3], cloud: &[Vec3], labels: &[u8]) -> Result<Node
     }
     Ok(out)
 }
-
-/// At most this many cloud points (an even stride) enter the rib fits.
-pub const FIT_SAMPLES: usize = 16_384;
 
 /// The 30 skeleton points of a cloud whose points carry rib labels (`label_of(index,
 /// point)`): per rib, least-squares cubics `y(x)`, `z(x)` (paper Eq. 5) through the
@@ -245,11 +244,11 @@ pub enum GuidedStage {
 /// controller's 100 Hz loop: every [`TargetSkeleton::step`] does at most `budget` units
 /// of work, a unit being about one scan of a node set ([`SOM1_CAPACITY`] distances, about
 /// as much as one SOM iteration): [`QUERIES_PER_UNIT`] nearest-node queries of a k-d tree
-/// ([`crate::kdtree`]) with what goes with them, [`SPLITS_PER_UNIT`] points partitioned
+/// ([`crate::math::kdtree`]) with what goes with them, [`SPLITS_PER_UNIT`] points partitioned
 /// while building a tree, [`FIT_POINTS_PER_UNIT`] rib-fit points, one widening of a
 /// carried node's neighbourhood, or one rigid fit; a stage change is a call of its own. The
 /// state lives here (about 13 KiB: the carried nodes, labels, three node trees, the
-/// mapping's transform cache), not on the stack. [`crate::pipeline::register`] runs it to
+/// mapping's transform cache), not on the stack. [`crate::registration::pipeline::register`] runs it to
 /// the end.
 pub struct TargetSkeleton {
     stage: GuidedStage,
@@ -289,12 +288,6 @@ pub const SPLITS_PER_UNIT: usize = 48;
 /// Cloud points labelled and added to the rib fits per unit of budget (their `f64`
 /// power sums are soft-float on the Cortex-M4F: ~4,000 instructions a point).
 pub const FIT_POINTS_PER_UNIT: usize = 3;
-
-/// Transform cache of the carried-node mapping: 64 entries × ~64 B ≈ 4 KiB. A full cache
-/// starts over (see [`TransformCache`]). On the emulated controller the carried nodes
-/// cost 76 M instructions with 16 entries that kept nothing new once full, 43 M with 64
-/// such entries, 28.5 M with 64 that start over.
-pub const CARRY_CACHE: usize = 64;
 
 impl TargetSkeleton {
     /// A run over no graphs yet: [`TargetSkeleton::start`] starts it (stepping it

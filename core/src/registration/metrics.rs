@@ -96,7 +96,7 @@ pub fn closest_distances(query: &[Vec3], tree: &KdTree<'_>) -> DistanceStats {
         mean: mean as f32,
         sd: libm::sqrt(var) as f32,
         max,
-        count: crate::geom::sat_u32(query.len()),
+        count: crate::math::geom::sat_u32(query.len()),
     }
 }
 
@@ -124,7 +124,7 @@ pub fn compare(registered: &mut [Vec3], target: &mut [Vec3]) -> Metrics {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rng::Rng;
+    use crate::math::rng::Rng;
 
     #[test]
     fn kd_tree_matches_brute_force() {

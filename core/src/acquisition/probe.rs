@@ -17,15 +17,13 @@
 //! * **Base** `{b}`: the robot base; the robot reports `b_T_ee` per pose.
 
 use crate::error::{Error, Result};
-use crate::geom::Rigid;
+use crate::math::geom::is_proper_rigid;
+use crate::math::geom::Rigid;
 use crate::Vec3;
 use nalgebra::Matrix3;
 
 /// Largest footprint or imaging depth accepted, mm (a probe image is never a metre wide).
 pub const MAX_PROBE_MM: f32 = 1000.0;
-/// Largest deviation of a calibration rotation from orthonormality (`|RᵀR − I|`, any
-/// entry) and of its determinant from +1.
-pub const ROTATION_TOLERANCE: f32 = 1e-3;
 
 /// The image geometry of a linear probe (also its wire and JSON form: the field names are
 /// the keys of `probe.json`'s `probe` object).
@@ -117,7 +115,7 @@ impl Calibration {
     }
 
     /// Checks the probe and both transforms (finite, rotations proper within
-    /// [`ROTATION_TOLERANCE`], translations within [`crate::MAX_COORD_MM`]).
+    /// [`ROTATION_TOLERANCE`](crate::math::geom::ROTATION_TOLERANCE), translations within [`crate::limits::MAX_COORD_MM`]).
     pub fn validate(&self) -> Result<()> {
         self.probe.validate()?;
         for (t, what) in [
@@ -153,18 +151,6 @@ impl Calibration {
         let p = self.probe.pixel_to_image(u, v)?;
         Some(self.b_t_us(b_t_ee).apply(&p))
     }
-}
-
-/// Finite, orthonormal with determinant +1 (within [`ROTATION_TOLERANCE`]) and a
-/// translation within [`crate::MAX_COORD_MM`].
-pub fn is_proper_rigid(t: &Rigid) -> bool {
-    let r = &t.rotation;
-    if !r.iter().chain(t.translation.iter()).all(|v| v.is_finite()) {
-        return false;
-    }
-    let ortho = (r.transpose() * r - Matrix3::identity()).amax() <= ROTATION_TOLERANCE;
-    let det = (r.determinant() - 1.0).abs() <= ROTATION_TOLERANCE;
-    ortho && det && t.translation.amax() <= crate::MAX_COORD_MM
 }
 
 #[cfg(test)]

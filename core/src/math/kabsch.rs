@@ -20,7 +20,7 @@
 //! of extent 10–300 mm.
 
 use crate::error::{Error, Result};
-use crate::geom::Rigid;
+use crate::math::geom::Rigid;
 use crate::Vec3;
 use nalgebra::{Matrix3, Matrix4, SymmetricEigen, Vector4, SVD};
 

@@ -29,37 +29,19 @@
 //! when labels are given ([`Error::RibOrder`] unless every rib gets exactly one endpoint
 //! per side); without labels, endpoints are ordered cranio-caudally on each side (the
 //! template is in the patient frame: `+y` cranial). Target: endpoints inherit the label
-//! of the template endpoint they are matched to (see [`crate::endpoints`]). Both clouds'
+//! of the template endpoint they are matched to (see [`crate::registration::endpoints`]). Both clouds'
 //! endpoints come from the same rule.
 
+use crate::config::Config;
+use crate::config::{LATERAL_FRACTION, RIBS, RIB_SAMPLES};
 use crate::error::{Cloud, Error, Result};
-use crate::fit::{equal_steps, Poly};
-use crate::geom::{Frame, Rigid};
-use crate::hull::{gift_wrap, Vec2};
-use crate::mst::Tree;
-use crate::pipeline::Config;
-use crate::som::{LiveScan, Som, SomTrainer};
+use crate::limits::{KEY_POINTS, SKELETON_POINTS, SOM1_CAPACITY};
+use crate::math::fit::{equal_steps, Poly};
+use crate::math::geom::{Frame, Rigid};
+use crate::math::hull::{gift_wrap, Vec2};
+use crate::math::mst::Tree;
+use crate::math::som::{LiveScan, Som, SomTrainer};
 use crate::Vec3;
-
-/// Capacity of SOM 1 (paper grid: 20 × 20 = 400 nodes; 400 × 12 B = 4.7 KiB).
-pub const SOM1_CAPACITY: usize = 400;
-/// Capacity of SOM 2, the skeleton key points (paper grid: 5 × 8 = 40; room for larger
-/// grids up to 128 nodes, 1.5 KiB; node indices must fit a `u8`).
-pub const KEY_POINTS: usize = 128;
-/// Ribs whose cartilage is registered.
-pub const RIBS: [u8; 4] = [2, 3, 4, 5];
-/// Resampled points per rib (paper: 6, 6, 8, 10).
-pub const RIB_SAMPLES: [usize; 4] = [6, 6, 8, 10];
-/// Paired skeleton points: 6 + 6 + 8 + 10.
-pub const SKELETON_POINTS: usize = 30;
-/// Fraction of a side's half-width a leaf must lie from the midline to be a rib end.
-pub const LATERAL_FRACTION: f32 = 0.35;
-/// Paper Eq. 4 threshold T_θ.
-pub const TURN_ANGLE_DEG: f32 = 60.0;
-
-const _: () =
-    assert!(RIB_SAMPLES[0] + RIB_SAMPLES[1] + RIB_SAMPLES[2] + RIB_SAMPLES[3] == SKELETON_POINTS);
-const _: () = assert!(KEY_POINTS <= crate::mst::MAX_TREE_NODES);
 
 /// The SOM / MST / endpoint stage of one cloud (6,840 B; see the README's memory table).
 #[derive(Clone, Debug, PartialEq)]
@@ -429,8 +411,8 @@ impl RibEnds {
         };
         if labels.len() != cloud.len() {
             return Err(Error::LabelCount {
-                found: crate::geom::sat_u32(labels.len()),
-                expected: crate::geom::sat_u32(cloud.len()),
+                found: crate::math::geom::sat_u32(labels.len()),
+                expected: crate::math::geom::sat_u32(cloud.len()),
             });
         }
         let mut ends = [[0u8; 2]; 4];
@@ -557,7 +539,7 @@ pub fn fit_rib(
     to_world: impl Fn(&Vec3) -> Vec3,
     out: &mut [Vec3],
 ) -> Result<u8> {
-    const CAP: usize = crate::skeleton::SOM1_CAPACITY;
+    const CAP: usize = crate::limits::SOM1_CAPACITY;
     if local.len() < 2 || local.len() > CAP {
         return Err(Error::Config("a rib fit needs 2..=400 points"));
     }

@@ -18,91 +18,12 @@
 //! principal axes (columns along the first), which makes the result independent of how
 //! the cloud is posed and needs no random start.
 
+use crate::config::SomConfig;
 use crate::error::{Error, Result};
-use crate::geom::Frame;
-use crate::rng::Rng;
+use crate::limits::{LIVE_SAMPLES, MAX_GRID_SIDE};
+use crate::math::geom::Frame;
+use crate::math::rng::Rng;
 use crate::Vec3;
-
-/// Points (at most) checked when finding the live nodes of a map.
-pub const LIVE_SAMPLES: usize = 2048;
-
-/// Longest grid side supported (rows or columns).
-pub const MAX_GRID_SIDE: usize = 64;
-
-/// Grid and training schedule of one SOM.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SomConfig {
-    /// Grid rows (along the second principal axis at initialisation).
-    pub rows: usize,
-    /// Grid columns (along the first principal axis at initialisation).
-    pub cols: usize,
-    /// Number of samples drawn (iterations).
-    pub iterations: u32,
-    /// Learning rate at the first iteration.
-    pub lr_start: f32,
-    /// Learning rate at the last iteration.
-    pub lr_end: f32,
-    /// Neighbourhood radius σ at the first iteration, in grid units.
-    pub radius_start: f32,
-    /// Neighbourhood radius σ at the last iteration, in grid units.
-    pub radius_end: f32,
-    /// Seed of the sampling sequence.
-    pub seed: u64,
-}
-
-impl SomConfig {
-    /// Paper SOM 1 (20 × 20): unifies a cloud to 400 evenly spread points.
-    pub const SOM1: SomConfig = SomConfig {
-        rows: 20,
-        cols: 20,
-        iterations: 6000,
-        lr_start: 0.5,
-        lr_end: 0.01,
-        radius_start: 6.0,
-        radius_end: 0.3,
-        seed: 0x5EED_0001,
-    };
-    /// Paper SOM 2 (5 × 8): 40 skeleton key points from the SOM-1 output.
-    pub const SOM2: SomConfig = SomConfig {
-        rows: 5,
-        cols: 8,
-        iterations: 3000,
-        lr_start: 0.5,
-        lr_end: 0.01,
-        radius_start: 3.0,
-        radius_end: 0.1,
-        seed: 0x5EED_0002,
-    };
-
-    fn check(&self, capacity: usize) -> Result<()> {
-        let grid = self.rows >= 1
-            && self.cols >= 1
-            && self.rows <= MAX_GRID_SIDE
-            && self.cols <= MAX_GRID_SIDE
-            && self.rows * self.cols <= capacity;
-        if !grid {
-            return Err(Error::Config(
-                "SOM grid must be 1..=64 per side and fit the map's capacity",
-            ));
-        }
-        let ok = self.iterations >= 1
-            && self.lr_start > 0.0
-            && self.lr_start <= 1.0
-            && self.lr_end > 0.0
-            && self.lr_end <= 1.0
-            && self.radius_start > 0.0
-            && self.radius_end > 0.0
-            && self.radius_start.is_finite()
-            && self.radius_end.is_finite();
-        if ok {
-            Ok(())
-        } else {
-            Err(Error::Config(
-                "SOM needs iterations >= 1, learning rates in (0, 1], radii > 0",
-            ))
-        }
-    }
-}
 
 /// A trained (or initialised) map of `rows × cols ≤ CAP` nodes, stored row after row.
 #[derive(Clone, Debug, PartialEq)]
@@ -228,7 +149,7 @@ impl<const CAP: usize> LiveScan<CAP> {
             let p = if n <= LIVE_SAMPLES {
                 points[k]
             } else {
-                points[self.rng.below(crate::geom::sat_u32(n)) as usize]
+                points[self.rng.below(crate::math::geom::sat_u32(n)) as usize]
             };
             let (r, c) = som.bmu(&p);
             if let Some(h) = self.hit.get_mut(r * som.cols + c) {
@@ -365,11 +286,14 @@ mod tests {
         // Every node ends on the sheet, and the map spreads over it: the nodes cover
         // its corners to within a grid cell of the 5 × 8 map (25 × 20 mm).
         for w in a.nodes() {
-            let d = crate::geom::nearest(&pts, w).unwrap().1.sqrt();
+            let d = crate::math::geom::nearest(&pts, w).unwrap().1.sqrt();
             assert!(d < 3.0, "node {w:?} is {d} mm off the data");
         }
         for corner in [Vec3::new(-100.0, -40.0, 5.0), Vec3::new(100.0, 40.0, 5.0)] {
-            let d = crate::geom::nearest(a.nodes(), &corner).unwrap().1.sqrt();
+            let d = crate::math::geom::nearest(a.nodes(), &corner)
+                .unwrap()
+                .1
+                .sqrt();
             assert!(d < 25.0, "corner {corner:?} is {d} mm from the map");
         }
     }

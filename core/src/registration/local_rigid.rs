@@ -22,19 +22,14 @@
 //! transform of a set does not depend on the cache, so neither does any result.
 
 use crate::error::{Cloud, Error, Result};
-use crate::geom::{validate, Rigid};
-use crate::kabsch;
-use crate::skeleton::SKELETON_POINTS;
+use crate::limits::SKELETON_POINTS;
+use crate::math::geom::{validate, Rigid};
+use crate::math::kabsch;
 use crate::Vec3;
 use nalgebra::{Matrix3, SymmetricEigen};
 
-/// Paper: `N_r = 10` nearest skeleton points per local transform.
-pub const NEIGHBOURS: usize = 10;
 /// Smallest accepted ratio (second / first principal spread) of a neighbourhood.
 pub const MIN_CROSS_SPREAD: f32 = 0.15;
-/// Default transform cache capacity (power of two). 128 entries × (4 B key + 48 B
-/// transform + index) ≈ 7.2 KiB. Points in an ordinary template share far fewer sets.
-pub const CACHE_CAPACITY: usize = 128;
 
 /// Fixed-capacity map from neighbourhood bit set to its fitted transform.
 pub struct TransformCache<const CAP: usize> {
@@ -332,13 +327,15 @@ fn bits(mask: u32) -> impl Iterator<Item = usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::config::NEIGHBOURS;
+    use crate::limits::CACHE_CAPACITY;
     use nalgebra::Rotation3;
 
     fn skeleton() -> [Vec3; SKELETON_POINTS] {
         // Four curved "ribs" at different heights.
         let mut out = [Vec3::zeros(); SKELETON_POINTS];
         let mut k = 0;
-        for (r, n) in crate::skeleton::RIB_SAMPLES.iter().enumerate() {
+        for (r, n) in crate::config::RIB_SAMPLES.iter().enumerate() {
             for j in 0..*n {
                 let x = -100.0 + 200.0 * j as f32 / (*n - 1) as f32;
                 out[k] = Vec3::new(x, -28.0 * r as f32 - 0.002 * x * x, -0.004 * x * x);

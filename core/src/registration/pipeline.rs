@@ -1,69 +1,15 @@
 //! The whole registration: template preparation, target skeleton, endpoint matching and
 //! the local-rigid mapping.
 
-use crate::endpoints::{match_endpoints, EndpointMatch};
+use crate::config::{Config, RibModel};
 use crate::error::{Cloud, Error, Result};
-use crate::geom::{nearest, validate, Frame, Rigid};
-use crate::guided::{fit_ribs, label_nodes, GuidedStage, NodeLabels, TargetSkeleton};
-use crate::local_rigid::{LocalRigid, NEIGHBOURS};
-use crate::skeleton::{GraphBuild, RibEnds, RibSkeleton, SkeletonGraph, TURN_ANGLE_DEG};
-use crate::som::SomConfig;
+use crate::limits::{MAX_CLOUD_POINTS, MIN_CLOUD_POINTS};
+use crate::math::geom::{nearest, validate, Frame, Rigid};
+use crate::registration::endpoints::{match_endpoints, EndpointMatch};
+use crate::registration::guided::{fit_ribs, label_nodes, GuidedStage, NodeLabels, TargetSkeleton};
+use crate::registration::local_rigid::LocalRigid;
+use crate::registration::skeleton::{GraphBuild, RibEnds, RibSkeleton, SkeletonGraph};
 use crate::Vec3;
-
-/// Fewest points accepted in a template or target cloud.
-pub const MIN_CLOUD_POINTS: usize = 100;
-/// Most points accepted (sample indices are drawn as `u32`; 2²⁴ keeps every index exact
-/// in an `f32` too). Nothing is copied, so this bounds no buffer.
-pub const MAX_CLOUD_POINTS: usize = 1 << 24;
-
-/// Pipeline parameters; [`Config::default`] is the paper's.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Config {
-    /// SOM 1 (20 × 20) schedule.
-    pub som1: SomConfig,
-    /// SOM 2 (5 × 8) schedule.
-    pub som2: SomConfig,
-    /// Turn-angle threshold T_θ of Eq. 4, degrees.
-    pub turn_angle_deg: f32,
-    /// N_r of Eq. 6.
-    pub neighbours: usize,
-    /// How rib points are found (improvement option; paper: [`RibModel::Graph`]).
-    pub rib_model: RibModel,
-}
-
-impl Default for Config {
-    fn default() -> Self {
-        Config {
-            som1: SomConfig::SOM1,
-            som2: SomConfig::SOM2,
-            turn_angle_deg: TURN_ANGLE_DEG,
-            neighbours: NEIGHBOURS,
-            rib_model: RibModel::Graph,
-        }
-    }
-}
-
-impl Config {
-    /// The paper's method with this project's improvement: the guided rib model (see the
-    /// README's evaluation). Pair it with an anterior-surface template (host-side
-    /// `ribreg_sim::prep::anterior_mask`).
-    pub fn improved() -> Self {
-        Config {
-            rib_model: RibModel::Guided,
-            ..Config::default()
-        }
-    }
-}
-
-/// How the 30 rib points of each cloud are found.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum RibModel {
-    /// The paper: SOM 2 key points, MST, 8 endpoints, tree paths, Eq. 4 filter.
-    Graph,
-    /// Improvement: ribs from the labelled template's SOM-1 nodes, carried onto the
-    /// target (see [`crate::guided`]). Needs a labelled template.
-    Guided,
-}
 
 /// The prepared CT template: skeleton graph, rib order and the 30 skeleton points.
 /// Built once per template (on the host), reused for every patient.
@@ -148,15 +94,15 @@ impl Template {
         som1: &[Vec3],
         labels: &[u8],
         frame: Frame,
-        skeleton: [Vec3; crate::skeleton::SKELETON_POINTS],
+        skeleton: [Vec3; crate::limits::SKELETON_POINTS],
         midline_fraction: [f32; 4],
     ) -> Result<Template> {
-        validate(som1, Cloud::Template, 1, crate::skeleton::SOM1_CAPACITY)?;
+        validate(som1, Cloud::Template, 1, crate::limits::SOM1_CAPACITY)?;
         validate(
             &skeleton,
             Cloud::Template,
             1,
-            crate::skeleton::SKELETON_POINTS,
+            crate::limits::SKELETON_POINTS,
         )?;
         if labels.len() != som1.len() {
             return Err(Error::LabelCount {
@@ -164,7 +110,7 @@ impl Template {
                 expected: som1.len() as u32,
             });
         }
-        let proper = crate::probe::is_proper_rigid(&Rigid {
+        let proper = crate::math::geom::is_proper_rigid(&Rigid {
             rotation: frame.axes,
             translation: frame.origin,
         });
@@ -179,7 +125,7 @@ impl Template {
             ));
         }
         let capacity = Error::Capacity {
-            capacity: crate::skeleton::SOM1_CAPACITY as u32,
+            capacity: crate::limits::SOM1_CAPACITY as u32,
         };
         let nodes = heapless::Vec::from_slice(som1).map_err(|_| capacity)?;
         let node_labels = NodeLabels::from_slice(labels).map_err(|_| capacity)?;
@@ -187,7 +133,7 @@ impl Template {
             graph: SkeletonGraph {
                 som1: nodes,
                 key_points: heapless::Vec::new(),
-                tree: crate::mst::Tree::default(),
+                tree: crate::math::mst::Tree::default(),
                 frame,
                 hull: heapless::Vec::new(),
                 midline: 0.0,

@@ -10,7 +10,7 @@
 //! point: 800 B for a 400-node SOM-1 set.
 //!
 //! # Exactly the brute-force answer
-//! [`KdTree::nearest`] returns what [`crate::geom::nearest`] returns — the smallest
+//! [`KdTree::nearest`] returns what [`crate::math::geom::nearest`] returns — the smallest
 //! squared distance, ties to the lowest index — restricted to `d² ≤ max_d2`, bit for
 //! bit: distances are computed by the same expression, and a subtree is skipped only when
 //! the squared distance to its splitting plane exceeds the best so far (rounding is
@@ -131,7 +131,7 @@ impl<const CAP: usize> KdTree<CAP> {
     }
 
     /// The point nearest to `q` with `d² ≤ max_d2` (index and `d²`, ties to the lowest
-    /// index), exactly as [`crate::geom::nearest`] filtered by `max_d2`; `None` when no
+    /// index), exactly as [`crate::math::geom::nearest`] filtered by `max_d2`; `None` when no
     /// point is that near, or when the tree is not built over `points`.
     pub fn nearest(&self, points: &[Vec3], q: &Vec3, max_d2: f32) -> Option<(usize, f32)> {
         if !self.ready(points) {
@@ -177,8 +177,8 @@ impl<const CAP: usize> KdTree<CAP> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geom::nearest;
-    use crate::rng::Rng;
+    use crate::math::geom::nearest;
+    use crate::math::rng::Rng;
 
     fn cloud(rng: &mut Rng, n: usize, grid: bool) -> std::vec::Vec<Vec3> {
         (0..n)

@@ -34,6 +34,7 @@
 //! [`MAX_FROM_CONTROLLER`]); buffers are sized from them and `const` assertions tie
 //! them together. Golden byte vectors of every message are in `tests/tests/wire.rs`.
 
+use crate::limits::MAX_FRAME_PIXELS;
 use serde::{Deserialize, Serialize};
 
 /// Protocol magic, ASCII "RBRG" read as a little-endian `u32`.
@@ -43,8 +44,6 @@ pub const VERSION: u16 = 1;
 
 /// Pixels travel as `u16` in 1/16 pixel: up to 4095.94 px at 0.0625 px resolution.
 pub const PIXEL_SUBDIVISIONS: f32 = 16.0;
-/// Most bone pixels in one frame message (a 384-pixel image annotated every 4th column).
-pub const MAX_FRAME_PIXELS: usize = 96;
 /// Template SOM-1 nodes per upload chunk (400 nodes in 13 chunks).
 pub const NODES_PER_CHUNK: usize = 32;
 /// Waypoints per upload chunk and per plan.
@@ -67,8 +66,8 @@ pub type P3 = [f32; 3];
 /// A rigid transform on the wire: rotation row-major (9) then translation (3).
 pub type RigidW = [f32; 12];
 
-/// Probe image geometry: the core's [`crate::probe::ProbeModel`] itself.
-pub use crate::probe::ProbeModel as ProbeW;
+/// Probe image geometry: the core's [`crate::acquisition::probe::ProbeModel`] itself.
+pub use crate::acquisition::probe::ProbeModel as ProbeW;
 const PROBE_W: usize = 2 * U16 + 2 * F32;
 
 /// Sweep and motion configuration.

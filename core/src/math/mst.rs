@@ -6,10 +6,8 @@
 //! at most [`MAX_TREE_NODES`] nodes.
 
 use crate::error::{Error, Result};
+use crate::limits::MAX_TREE_NODES;
 use crate::Vec3;
-
-/// Largest tree (node indices are `u8`).
-pub const MAX_TREE_NODES: usize = 255;
 
 /// A spanning tree over up to `N` points stored as parent links (node 0 is the root).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -5,7 +5,7 @@
 //!    points from five starts — the identity and the four proper rotations that align
 //!    the two clouds' principal axes (axis signs `(±1, ±1)`, third from the cross
 //!    product) — each after centroid alignment, [`COARSE_ITERATIONS`] iterations of
-//!    nearest-neighbour pairing and [`crate::kabsch::fit`]. The start with the lowest
+//!    nearest-neighbour pairing and [`crate::math::kabsch::fit`]. The start with the lowest
 //!    final RMS wins (the sternum and the unequal cartilage lengths break the
 //!    near-symmetries of the chest). No initial alignment of the clouds is needed.
 //! 2. **Endpoint ICP.** The paper's small ICP on the eight endpoints, starting from the
@@ -17,10 +17,11 @@
 //!    with.
 
 use crate::error::Result;
-use crate::geom::{Frame, Rigid};
-use crate::kabsch::{self, PairSums};
-use crate::kdtree::KdTree;
-use crate::skeleton::{RibEnds, SkeletonGraph};
+use crate::limits::ICP_CAPACITY;
+use crate::math::geom::{Frame, Rigid};
+use crate::math::kabsch::{self, PairSums};
+use crate::math::kdtree::KdTree;
+use crate::registration::skeleton::{RibEnds, SkeletonGraph};
 use crate::Vec3;
 use nalgebra::Matrix3;
 
@@ -177,9 +178,6 @@ impl CoarsePose {
         (self.start >= Self::STARTS).then_some(self.best).flatten()
     }
 }
-
-/// Largest source and destination set of [`icp`] (a SOM-1 node set).
-pub const ICP_CAPACITY: usize = crate::skeleton::SOM1_CAPACITY;
 
 /// The nearest-point index of an ICP's destination set.
 pub type IcpTree = KdTree<ICP_CAPACITY>;

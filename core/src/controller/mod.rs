@@ -37,14 +37,16 @@
 //! Time is the caller's monotonic clock in µs (`now_us`). Nothing allocates or panics on
 //! input; replies wait in a bounded outbox ([`Controller::next_reply`]).
 
-use crate::compound::{Compounder, DEFAULT_MAX_COARSENINGS};
+use crate::acquisition::compound::{Compounder, DEFAULT_MAX_COARSENINGS};
+use crate::acquisition::probe::Calibration;
+use crate::config::Config;
 use crate::error::{Error, Result};
-use crate::geom::Rigid;
-use crate::local_rigid::{Lookup, TransformCache};
-use crate::pipeline::{Config, Registering, Registration, Template, MIN_CLOUD_POINTS};
-use crate::probe::Calibration;
-use crate::skeleton::{SKELETON_POINTS, SOM1_CAPACITY};
-use crate::track::{TrackedPose, TRACK_CAPACITY};
+use crate::limits::{MIN_CLOUD_POINTS, OUTBOX, SKELETON_POINTS, SOM1_CAPACITY, TRACK_CAPACITY};
+use crate::math::geom::Rigid;
+use crate::registration::local_rigid::{Lookup, TransformCache};
+use crate::registration::pipeline::{Registering, Registration, Template};
+
+use crate::acquisition::track::TrackedPose;
 use crate::wire::{
     error_code, Command, Configure, CostW, FrameError, FromController, NackCode, PoseW, SetpointW,
     State, StatusW, TemplateShape, ToController, WaypointW, MAGIC, MAX_FRAME, MAX_WAYPOINTS,
@@ -53,11 +55,6 @@ use crate::wire::{
 use crate::Vec3;
 use nalgebra::{Matrix3, Rotation3, SymmetricEigen, UnitQuaternion};
 
-/// Voxel capacity of the controller's compounding cloud: 1536 × 24 B = 36 KiB, so that
-/// the registration's stack (about 47 KiB at its deepest, from the firmware's frame sizes)
-/// fits beside the controller in 128 KiB of RAM. A whole-chest sweep fits it at 6 mm
-/// voxels ([`CONTROLLER_VOXEL_MM`] coarsened once).
-pub const CONTROLLER_VOXELS: usize = 1536;
 /// Finest voxel edge the robot PC configures for the controller, mm.
 pub const CONTROLLER_VOXEL_MM: f32 = 3.0;
 
@@ -76,7 +73,7 @@ pub const SOM_ITERATIONS_PER_POLL: u32 = 8;
 /// ~1,800 instructions each on the emulated Cortex-M4F (865 voxels: 14 calls of 64,
 /// 1.79 M in all, the worst 125 k; the registration's set-up is a call of its own).
 pub const VOXELS_FINISHED_PER_POLL: usize = 64;
-/// Work ([`crate::compound::VoxelCloud::work`], ~20 instructions a unit) spent per
+/// Work ([`crate::acquisition::compound::VoxelCloud::work`], ~20 instructions a unit) spent per
 /// [`Controller::poll`] moving queued sweep points into the voxel cloud (a frame message
 /// only places its points, see [`Compounder`]): 16 plain points, fewer when they start
 /// voxels that shift the sorted cloud; plus at most one more insert, which with a
@@ -84,9 +81,6 @@ pub const VOXELS_FINISHED_PER_POLL: usize = 64;
 pub const SWEEP_WORK_PER_POLL: u64 = 2048;
 /// Transform cache of the waypoint mapping (waypoints rarely share a neighbourhood).
 const WAYPOINT_CACHE: usize = 4;
-/// Replies waiting to be sent: a poll emits at most one setpoint or fault and the
-/// results, a received frame one reply; 32 covers a whole result (≤ 32 waypoints).
-pub const OUTBOX: usize = 40;
 /// Replies remembered for duplicates (a re-sent frame gets its first reply again).
 const RECENT: usize = 16;
 /// Radius of the bone-surface patch whose principal axes orient a probe target, mm.
@@ -426,7 +420,7 @@ impl<const VOXELS: usize> Controller<VOXELS> {
             ToController::Pose(p) => self.pose(&p, now_us).map_err(invalid),
             ToController::Frame(f) => {
                 self.require(&[Sweeping])?;
-                let mut pixels = [[0.0f32; 2]; crate::wire::MAX_FRAME_PIXELS];
+                let mut pixels = [[0.0f32; 2]; crate::limits::MAX_FRAME_PIXELS];
                 for (o, p) in pixels.iter_mut().zip(&f.pixels) {
                     *o = [
                         f32::from(p[0]) / PIXEL_SUBDIVISIONS,
@@ -694,7 +688,7 @@ impl<const VOXELS: usize> Controller<VOXELS> {
         self.lookup = None;
         self.mapped = None;
         self.waypoint_cache = TransformCache::new();
-        match crate::pipeline::Registering::start(self.sweep.cloud.finish(), cfg) {
+        match crate::registration::pipeline::Registering::start(self.sweep.cloud.finish(), cfg) {
             Ok(r) => self.registering = Some(r),
             Err(e) => self.fail(e),
         }
@@ -815,7 +809,7 @@ fn target(
 
 fn finite(p: &[f32; 3]) -> bool {
     p.iter()
-        .all(|v| v.is_finite() && v.abs() <= crate::MAX_COORD_MM)
+        .all(|v| v.is_finite() && v.abs() <= crate::limits::MAX_COORD_MM)
 }
 
 fn rigid(w: &[f32; 12]) -> Rigid {
@@ -841,7 +835,7 @@ fn settings(c: &Configure) -> Result<Settings> {
     if !(c.standoff_mm.is_finite() && (0.0..=200.0).contains(&c.standoff_mm)) {
         return Err(Error::Config("standoff must be within 0..=200 mm"));
     }
-    if !(crate::compound::MIN_VOXEL_MM..=100.0).contains(&c.voxel_mm) {
+    if !(crate::acquisition::compound::MIN_VOXEL_MM..=100.0).contains(&c.voxel_mm) {
         return Err(Error::Config("voxel size must be between 0.1 and 100 mm"));
     }
     if c.lag_us.unsigned_abs() > 10_000_000 {
@@ -862,7 +856,7 @@ fn template(nodes: &[Vec3], labels: &[u8], shape: &TemplateShape) -> Result<Temp
     for (o, p) in skeleton.iter_mut().zip(&shape.skeleton) {
         *o = Vec3::from(*p);
     }
-    let frame = crate::geom::Frame {
+    let frame = crate::math::geom::Frame {
         origin: Vec3::from(shape.origin),
         axes: Matrix3::from_row_slice(&shape.axes),
         spread: Vec3::from(shape.spread),
@@ -1134,8 +1128,9 @@ mod link_tests {
 #[cfg(test)]
 mod fuzz_tests {
     use super::*;
-    use crate::rng::Rng;
-    use crate::wire::{encode, FrameW, Node, PoseW, ProbeW, MAX_FRAME, MAX_FRAME_PIXELS};
+    use crate::limits::MAX_FRAME_PIXELS;
+    use crate::math::rng::Rng;
+    use crate::wire::{encode, FrameW, Node, PoseW, ProbeW, MAX_FRAME};
 
     fn f(rng: &mut Rng) -> f32 {
         match rng.below(8) {

@@ -352,7 +352,7 @@ impl Pairs {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rng::Rng;
+    use crate::math::rng::Rng;
 
     /// Up-and-down probe motion (three incommensurate sines, never periodic within the
     /// search range) along a tilted axis; the landmark row follows it `lag` later.

@@ -1,8 +1,9 @@
 //! Small geometric building blocks: input checks, principal axes, rigid transforms.
 
 use crate::error::{Cloud, Error, Result};
-use crate::rng::Rng;
-use crate::{Vec3, MAX_COORD_MM};
+use crate::limits::MAX_COORD_MM;
+use crate::math::rng::Rng;
+use crate::Vec3;
 use nalgebra::{Matrix3, SymmetricEigen};
 
 /// Checks that every coordinate is finite and within ±[`MAX_COORD_MM`], and that the
@@ -215,6 +216,22 @@ pub fn nearest(set: &[Vec3], p: &Vec3) -> Option<(usize, f32)> {
         .map(|q| (q - p).norm_squared())
         .enumerate()
         .min_by(|a, b| a.1.total_cmp(&b.1))
+}
+
+/// Largest deviation of a calibration rotation from orthonormality (`|RᵀR − I|`, any
+/// entry) and of its determinant from +1.
+pub const ROTATION_TOLERANCE: f32 = 1e-3;
+
+/// Finite, orthonormal with determinant +1 (within [`ROTATION_TOLERANCE`]) and a
+/// translation within [`crate::limits::MAX_COORD_MM`].
+pub fn is_proper_rigid(t: &Rigid) -> bool {
+    let r = &t.rotation;
+    if !r.iter().chain(t.translation.iter()).all(|v| v.is_finite()) {
+        return false;
+    }
+    let ortho = (r.transpose() * r - Matrix3::identity()).amax() <= ROTATION_TOLERANCE;
+    let det = (r.determinant() - 1.0).abs() <= ROTATION_TOLERANCE;
+    ortho && det && t.translation.amax() <= crate::limits::MAX_COORD_MM
 }
 
 #[cfg(test)]
