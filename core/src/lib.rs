@@ -1,6 +1,7 @@
 #![cfg_attr(not(test), no_std)]
 #![forbid(unsafe_code)]
-#![warn(missing_docs)]
+// The core never panics on input: no unwrap, expect or panic outside tests.
+#![deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 //! # ribreg-core
 //!
 //! Skeleton-graph non-rigid registration of rib-cartilage point clouds (Jiang et al.,
