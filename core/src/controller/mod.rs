@@ -36,7 +36,28 @@
 //!
 //! Time is the caller's monotonic clock in µs (`now_us`). Nothing allocates or panics on
 //! input; replies wait in a bounded outbox ([`Controller::next_reply`]).
+//!
+//! # Layout
+//! * this module: the [`Controller`], its state machine ([`Controller::receive`] applies
+//!   a message, [`Controller::poll`] does the periodic work), the sweep and the
+//!   registration in bounded steps;
+//! * `link`: sequence numbers, ACK/NACK, duplicates, the recent replies, the outbox;
+//! * `motion`: segments, the trapezoid profile, interpolation, setpoint streaming, the
+//!   pose watchdog;
+//! * `target`: probe targets ([`probe_pose`], [`PATCH_RADIUS_MM`], the standoff).
+//!
+//! Everything public is re-exported here: the paths are `ribreg_core::controller::X`.
 
+mod link;
+mod motion;
+mod target;
+
+pub use self::motion::{DWELL_US, POSE_TIMEOUT_US, SETPOINT_PERIOD_US};
+pub use self::target::{probe_pose, ProbeTarget, PATCH_RADIUS_MM};
+
+use self::link::RECENT;
+use self::motion::Segment;
+use self::target::target;
 use crate::acquisition::compound::{Compounder, DEFAULT_MAX_COARSENINGS};
 use crate::acquisition::probe::Calibration;
 use crate::config::Config;
@@ -44,26 +65,19 @@ use crate::error::{Error, Result};
 use crate::limits::{MIN_CLOUD_POINTS, OUTBOX, SKELETON_POINTS, SOM1_CAPACITY, TRACK_CAPACITY};
 use crate::math::geom::Rigid;
 use crate::registration::local_rigid::{Lookup, TransformCache};
-use crate::registration::pipeline::{Registering, Registration, Template};
+use crate::registration::pipeline::{Registering, Template};
 
 use crate::acquisition::track::TrackedPose;
 use crate::wire::{
-    error_code, Command, Configure, CostW, FrameError, FromController, NackCode, PoseW, SetpointW,
-    State, StatusW, TemplateShape, ToController, WaypointW, MAGIC, MAX_FRAME, MAX_WAYPOINTS,
-    PIXEL_SUBDIVISIONS, VERSION,
+    error_code, Command, Configure, CostW, FrameError, FromController, NackCode, PoseW, State,
+    StatusW, TemplateShape, ToController, WaypointW, MAX_WAYPOINTS, PIXEL_SUBDIVISIONS,
 };
 use crate::Vec3;
-use nalgebra::{Matrix3, Rotation3, SymmetricEigen, UnitQuaternion};
+use nalgebra::Matrix3;
 
 /// Finest voxel edge the robot PC configures for the controller, mm.
 pub const CONTROLLER_VOXEL_MM: f32 = 3.0;
 
-/// Robot poses may pause this long while executing before setpoints stop, µs.
-pub const POSE_TIMEOUT_US: u64 = 50_000;
-/// Setpoint period while executing, µs (100 Hz).
-pub const SETPOINT_PERIOD_US: u64 = 10_000;
-/// Time the probe rests at each target, µs.
-pub const DWELL_US: u64 = 500_000;
 /// Units of work per registration step ([`Registering::step`]'s budget: SOM iterations,
 /// node-set scans or rigid fits). One iteration of SOM 1 costs about 8,000 instructions
 /// on the Cortex-M4F (BMU search over 400 nodes and the neighbourhood update), so 8 keep
@@ -81,25 +95,6 @@ pub const VOXELS_FINISHED_PER_POLL: usize = 64;
 pub const SWEEP_WORK_PER_POLL: u64 = 2048;
 /// Transform cache of the waypoint mapping (waypoints rarely share a neighbourhood).
 const WAYPOINT_CACHE: usize = 4;
-/// Replies remembered for duplicates (a re-sent frame gets its first reply again).
-const RECENT: usize = 16;
-/// Radius of the bone-surface patch whose principal axes orient a probe target, mm.
-pub const PATCH_RADIUS_MM: f32 = 12.0;
-/// Fewest cloud points in the patch; below it the probe axis points straight at the
-/// sweep's mean probe position.
-const MIN_PATCH_POINTS: usize = 6;
-
-/// A probe target: where the TCP goes for one mapped waypoint.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ProbeTarget {
-    /// The mapped waypoint (on the bone surface level), base frame, mm.
-    pub waypoint: Vec3,
-    /// TCP pose: on the skin side at the configured standoff, beam along the inward
-    /// surface normal.
-    pub tcp: Rigid,
-    /// Quality: RMS residual of the local rigid fit that mapped the waypoint, mm.
-    pub quality_mm: f32,
-}
 
 /// Sweep, calibration and motion settings (from [`Configure`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -110,15 +105,6 @@ struct Settings {
     max_speed: f32,
     max_accel: f32,
     standoff: f32,
-}
-
-/// One straight move with a trapezoidal speed profile, then a dwell.
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct Segment {
-    from: Rigid,
-    to: Rigid,
-    start_us: u64,
-    target: u8,
 }
 
 /// The controller (see the module docs). `VOXELS` is the compounding cloud's capacity.
@@ -233,89 +219,12 @@ impl<const VOXELS: usize> Controller<VOXELS> {
         Some(self.sweep.cloud.finish())
     }
 
-    /// The next reply to send, with its sequence number.
-    pub fn next_reply(&mut self) -> Option<(u16, FromController)> {
-        self.outbox.pop_front()
-    }
-
-    fn send(&mut self, msg: FromController) {
-        let seq = self.out_seq;
-        self.out_seq = self.out_seq.wrapping_add(1);
-        if self.outbox.push_back((seq, msg)).is_err() {
-            self.dropped_replies = self.dropped_replies.saturating_add(1);
-        }
-    }
-
-    /// A reply to host message `seq`, remembered for duplicates.
-    fn reply(&mut self, seq: u16, msg: FromController) {
-        if self.recent.is_full() {
-            self.recent.pop_front();
-        }
-        let _ = self.recent.push_back((seq, msg));
-        self.send(msg);
-    }
-
     /// Handles one frame from the link: its bytes (without the delimiter, decoded in
     /// place) or the receiver's error.
     pub fn receive(&mut self, frame: core::result::Result<&mut [u8], FrameError>, now_us: u64) {
-        let decoded = frame.and_then(crate::wire::decode::<ToController>);
-        let (seq, msg) = match decoded {
-            Ok(m) => m,
-            Err(e) => {
-                let code = if e == FrameError::TooLong {
-                    NackCode::TooLong
-                } else {
-                    NackCode::Corrupt
-                };
-                self.send(FromController::Nack {
-                    seq: self.expected,
-                    code,
-                });
-                return;
-            }
+        let Some((seq, msg)) = self.accept(frame) else {
+            return;
         };
-        if let ToController::Hello { magic, version } = msg {
-            if seq == 0 && magic == MAGIC && version == VERSION {
-                self.connected = true;
-                self.expected = 1;
-                self.recent.clear();
-                self.reply(
-                    0,
-                    FromController::HelloAck {
-                        magic: MAGIC,
-                        version: VERSION,
-                        max_frame: MAX_FRAME as u16,
-                    },
-                );
-            } else {
-                self.send(FromController::Nack {
-                    seq,
-                    code: NackCode::Version,
-                });
-            }
-            return;
-        }
-        if !self.connected {
-            self.send(FromController::Nack {
-                seq,
-                code: NackCode::Version,
-            });
-            return;
-        }
-        if seq != self.expected {
-            // Behind the expected number (within half the space): a duplicate.
-            if self.expected.wrapping_sub(seq) <= 0x8000 {
-                let first = self.recent.iter().find(|(s, _)| *s == seq).map(|(_, m)| *m);
-                self.send(first.unwrap_or(FromController::Ack { seq }));
-            } else {
-                self.send(FromController::Nack {
-                    seq: self.expected,
-                    code: NackCode::OutOfOrder,
-                });
-            }
-            return;
-        }
-        self.expected = self.expected.wrapping_add(1);
         let reply = match self.apply(msg, now_us) {
             Ok(()) => FromController::Ack { seq },
             Err(code) => FromController::Nack { seq, code },
@@ -710,101 +619,6 @@ impl<const VOXELS: usize> Controller<VOXELS> {
             error_code(&e),
         )));
     }
-
-    fn execute(&mut self, now_us: u64) {
-        let fresh = self
-            .last_pose
-            .is_some_and(|(at, _)| now_us.saturating_sub(at) <= POSE_TIMEOUT_US);
-        if !fresh {
-            if self.paused_since.is_none() {
-                self.paused_since = Some(now_us);
-                self.send(FromController::Fault(crate::wire::Fault::PoseTimeout));
-            }
-            return;
-        }
-        if let Some(since) = self.paused_since.take() {
-            // Resume where the setpoints stopped: the profile clock skips the pause.
-            if let Some(seg) = &mut self.segment {
-                seg.start_us = seg.start_us.saturating_add(now_us.saturating_sub(since));
-            }
-            self.next_setpoint_us = now_us;
-        }
-        if now_us < self.next_setpoint_us {
-            return;
-        }
-        self.next_setpoint_us = now_us.saturating_add(SETPOINT_PERIOD_US);
-        let (Some(seg), Some(s)) = (self.segment, self.settings) else {
-            return;
-        };
-        let d = (seg.to.translation - seg.from.translation).norm();
-        let move_us = trapezoid_duration_us(d, s.max_speed, s.max_accel);
-        let elapsed = now_us.saturating_sub(seg.start_us);
-        let pose = if elapsed >= move_us {
-            seg.to
-        } else {
-            let travelled = trapezoid_distance(elapsed as f32 * 1e-6, d, s.max_speed, s.max_accel);
-            interpolate(
-                &seg.from,
-                &seg.to,
-                if d > 0.0 { travelled / d } else { 1.0 },
-            )
-        };
-        self.waypoint = seg.target;
-        let q =
-            UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(pose.rotation));
-        self.send(FromController::Setpoint(SetpointW {
-            t_us: now_us,
-            position: pose.translation.into(),
-            quat: [q.w, q.i, q.j, q.k],
-            waypoint: seg.target,
-        }));
-        if elapsed >= move_us.saturating_add(DWELL_US) {
-            let next = usize::from(seg.target) + 1;
-            match self.targets.get(next) {
-                Some(t) => {
-                    self.segment = Some(Segment {
-                        from: seg.to,
-                        to: t.tcp,
-                        start_us: now_us,
-                        target: next as u8,
-                    });
-                }
-                None => {
-                    self.segment = None;
-                    self.state = State::Done;
-                }
-            }
-        }
-    }
-}
-
-/// Maps one waypoint and turns it into a probe target.
-#[inline(never)]
-#[allow(clippy::too_many_arguments)]
-fn target(
-    reg: &Registration,
-    w: &Vec3,
-    t: Rigid,
-    mask: u32,
-    cloud: &[Vec3],
-    settings: Option<&Settings>,
-    probe_sum: Vec3,
-    probe_count: u32,
-) -> Result<ProbeTarget> {
-    let s = settings.ok_or(Error::Config("no configuration"))?;
-    let skin = if probe_count > 0 {
-        probe_sum / probe_count as f32
-    } else {
-        Vec3::zeros()
-    };
-    let quality_mm = reg.map.residual(&t, mask);
-    let p = t.apply(w);
-    let tcp = probe_pose(cloud, &p, &skin, s.standoff);
-    Ok(ProbeTarget {
-        waypoint: p,
-        tcp,
-        quality_mm,
-    })
 }
 
 fn finite(p: &[f32; 3]) -> bool {
@@ -864,265 +678,6 @@ fn template(nodes: &[Vec3], labels: &[u8], shape: &TemplateShape) -> Result<Temp
     Template::from_parts(nodes, labels, frame, skeleton, shape.midline_fraction)
 }
 
-/// The TCP pose aiming at `p` on the bone surface: local surface normal and gap
-/// direction from the principal axes of the cloud within [`PATCH_RADIUS_MM`], the normal
-/// oriented toward `skin` (the sweep's mean probe position), the TCP `standoff` mm out
-/// along it, its beam (z) along the inward normal, its footprint (x) along the gap.
-pub fn probe_pose(cloud: &[Vec3], p: &Vec3, skin: &Vec3, standoff: f32) -> Rigid {
-    let r2 = PATCH_RADIUS_MM * PATCH_RADIUS_MM;
-    let (mut sum, mut n) = (Vec3::zeros(), 0usize);
-    for q in cloud.iter().filter(|q| (*q - p).norm_squared() <= r2) {
-        sum += q;
-        n += 1;
-    }
-    let up = (skin - p).try_normalize(1e-6).unwrap_or(Vec3::z());
-    let (mut normal, mut along) = (up, up.cross(&Vec3::x()));
-    if n >= MIN_PATCH_POINTS {
-        let mean = sum / n as f32;
-        let mut cov = Matrix3::zeros();
-        for q in cloud.iter().filter(|q| (*q - p).norm_squared() <= r2) {
-            let d = q - mean;
-            cov += d * d.transpose();
-        }
-        let eig = SymmetricEigen::new(cov);
-        normal = eig.eigenvectors.column(eig.eigenvalues.imin()).into_owned();
-        along = eig.eigenvectors.column(eig.eigenvalues.imax()).into_owned();
-    }
-    if normal.dot(&up) < 0.0 {
-        normal = -normal;
-    }
-    let z = -normal;
-    let x = (along - z * along.dot(&z))
-        .try_normalize(1e-6)
-        .or_else(|| z.cross(&Vec3::y()).try_normalize(1e-6))
-        .unwrap_or(Vec3::x());
-    let y = z.cross(&x);
-    Rigid {
-        rotation: Matrix3::from_columns(&[x, y, z]),
-        translation: p + normal * standoff,
-    }
-}
-
-/// Time of a rest-to-rest move of `d` mm under speed and acceleration limits, µs.
-fn trapezoid_duration_us(d: f32, v: f32, a: f32) -> u64 {
-    let t = if d * a <= v * v {
-        2.0 * libm::sqrtf(d / a)
-    } else {
-        d / v + v / a
-    };
-    (t * 1e6) as u64
-}
-
-/// Distance covered after `t` s of that move.
-fn trapezoid_distance(t: f32, d: f32, v: f32, a: f32) -> f32 {
-    let (t_acc, v_peak) = if d * a <= v * v {
-        (libm::sqrtf(d / a), libm::sqrtf(d * a))
-    } else {
-        (v / a, v)
-    };
-    let d_acc = 0.5 * v_peak * t_acc;
-    let t_cruise = (d - 2.0 * d_acc) / v_peak;
-    let s = if t <= t_acc {
-        0.5 * a * t * t
-    } else if t <= t_acc + t_cruise {
-        d_acc + v_peak * (t - t_acc)
-    } else {
-        let td = (t - t_acc - t_cruise).min(t_acc);
-        d - d_acc + v_peak * td - 0.5 * a * td * td
-    };
-    s.clamp(0.0, d)
-}
-
-/// Position lerp and orientation slerp from `a` (s = 0) to `b` (s = 1).
-fn interpolate(a: &Rigid, b: &Rigid, s: f32) -> Rigid {
-    let ta = TrackedPose::from_rigid(0.0, a);
-    let tb = TrackedPose::from_rigid(1.0, b);
-    ta.interpolate(&tb, s.clamp(0.0, 1.0))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn trapezoid_profile_respects_limits() {
-        for (d, v, a) in [(100.0f32, 20.0, 50.0), (2.0, 20.0, 50.0), (0.0, 10.0, 10.0)] {
-            let total = trapezoid_duration_us(d, v, a) as f32 * 1e-6;
-            let mut prev = 0.0;
-            let mut prev_speed = 0.0;
-            let dt = 0.01;
-            let mut t = 0.0;
-            while t <= total + dt {
-                let s = trapezoid_distance(t, d, v, a);
-                let speed = (s - prev) / dt;
-                assert!(speed <= v * 1.01 + 1e-3, "{d} {t}: {speed}");
-                assert!(
-                    (speed - prev_speed).abs() / dt <= a * 1.05 + 1e-2 || t < 2.0 * dt,
-                    "{d} {t}"
-                );
-                prev = s;
-                prev_speed = speed;
-                t += dt;
-            }
-            assert!((trapezoid_distance(total, d, v, a) - d).abs() < 1e-3);
-        }
-    }
-
-    #[test]
-    fn probe_pose_stands_off_along_the_outward_normal() {
-        // A flat patch in z = 0; the skin is above.
-        let mut cloud = std::vec::Vec::new();
-        for i in 0..20 {
-            for j in 0..8 {
-                cloud.push(Vec3::new(i as f32 - 10.0, (j as f32 - 4.0) * 0.5, 0.0));
-            }
-        }
-        let t = probe_pose(&cloud, &Vec3::zeros(), &Vec3::new(0.0, 0.0, 50.0), 15.0);
-        assert!((t.translation - Vec3::new(0.0, 0.0, 15.0)).norm() < 1e-4);
-        assert!((t.rotation.column(2) - Vec3::new(0.0, 0.0, -1.0)).norm() < 1e-4);
-        assert!(
-            t.rotation.column(0).x.abs() > 0.999,
-            "footprint along the long axis"
-        );
-        assert!((t.rotation.determinant() - 1.0).abs() < 1e-4);
-    }
-}
-
-#[cfg(test)]
-mod link_tests {
-    use super::*;
-    use crate::wire::{encode, MAX_FRAME};
-
-    type C = Controller<64>;
-
-    fn frame(seq: u16, msg: &ToController) -> std::vec::Vec<u8> {
-        let mut buf = [0u8; MAX_FRAME];
-        let n = encode(seq, msg, &mut buf).unwrap();
-        buf[..n - 1].to_vec()
-    }
-
-    fn feed(c: &mut C, seq: u16, msg: &ToController) -> std::vec::Vec<FromController> {
-        let mut f = frame(seq, msg);
-        c.receive(Ok(&mut f), 0);
-        core::iter::from_fn(|| c.next_reply().map(|(_, m)| m)).collect()
-    }
-
-    const HELLO: ToController = ToController::Hello {
-        magic: MAGIC,
-        version: VERSION,
-    };
-    const STATUS: ToController = ToController::Command(Command::Status);
-
-    #[test]
-    fn handshake_first_and_version_checked() {
-        let mut c = C::new();
-        assert_eq!(
-            feed(&mut c, 0, &STATUS),
-            [FromController::Nack {
-                seq: 0,
-                code: NackCode::Version
-            }]
-        );
-        let wrong = ToController::Hello {
-            magic: MAGIC,
-            version: VERSION + 1,
-        };
-        assert!(matches!(
-            feed(&mut c, 0, &wrong)[..],
-            [FromController::Nack {
-                code: NackCode::Version,
-                ..
-            }]
-        ));
-        assert!(matches!(
-            feed(&mut c, 0, &HELLO)[..],
-            [FromController::HelloAck { .. }]
-        ));
-    }
-
-    #[test]
-    fn duplicates_are_not_reapplied_gaps_and_corruption_are_nacked() {
-        let mut c = C::new();
-        feed(&mut c, 0, &HELLO);
-        // Seq 1: a status (its reply: a Status, then the ACK).
-        let r = feed(&mut c, 1, &STATUS);
-        assert!(matches!(
-            r[..],
-            [FromController::Status(_), FromController::Ack { seq: 1 }]
-        ));
-        // The same frame again: only its ACK again, no second Status.
-        assert_eq!(feed(&mut c, 1, &STATUS), [FromController::Ack { seq: 1 }]);
-        // Seq 3 skips 2: NACK naming 2, nothing applied.
-        assert_eq!(
-            feed(&mut c, 3, &STATUS),
-            [FromController::Nack {
-                seq: 2,
-                code: NackCode::OutOfOrder
-            }]
-        );
-        // A corrupt frame: NACK naming the number expected.
-        let mut f = frame(2, &STATUS);
-        f[1] ^= 0x10;
-        c.receive(Ok(&mut f), 0);
-        assert_eq!(
-            c.next_reply().map(|(_, m)| m),
-            Some(FromController::Nack {
-                seq: 2,
-                code: NackCode::Corrupt
-            })
-        );
-        c.receive(Err(FrameError::TooLong), 0);
-        assert_eq!(
-            c.next_reply().map(|(_, m)| m),
-            Some(FromController::Nack {
-                seq: 2,
-                code: NackCode::TooLong
-            })
-        );
-        // A message in the wrong state is refused with its own number and consumed.
-        let r = feed(&mut c, 2, &ToController::Command(Command::EndSweep));
-        assert_eq!(
-            r,
-            [FromController::Nack {
-                seq: 2,
-                code: NackCode::BadState
-            }]
-        );
-        assert!(
-            matches!(feed(&mut c, 3, &STATUS)[..], [FromController::Status(s), FromController::Ack { seq: 3 }] if s.expected_seq == 4)
-        );
-    }
-
-    #[test]
-    fn bad_configuration_is_invalid_and_nothing_changes() {
-        let mut c = C::new();
-        feed(&mut c, 0, &HELLO);
-        let bad = ToController::Configure(Configure {
-            probe: crate::wire::ProbeW {
-                width_px: 0,
-                height_px: 10,
-                footprint_mm: 30.0,
-                depth_mm: 30.0,
-            },
-            tcp_t_us: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0],
-            ee_t_tcp: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0],
-            lag_us: 0,
-            voxel_mm: 2.0,
-            max_speed_mm_s: 10.0,
-            max_accel_mm_s2: 10.0,
-            standoff_mm: 10.0,
-        });
-        assert!(matches!(
-            feed(&mut c, 1, &bad)[..],
-            [FromController::Nack {
-                seq: 1,
-                code: NackCode::Invalid(12)
-            }]
-        ));
-        assert_eq!(c.state(), State::Idle);
-    }
-}
-
 /// Random messages with random (often hostile) content, random sequence numbers and
 /// random corruption never make the controller panic, and it keeps its invariants.
 #[cfg(test)]
@@ -1130,7 +685,7 @@ mod fuzz_tests {
     use super::*;
     use crate::limits::MAX_FRAME_PIXELS;
     use crate::math::rng::Rng;
-    use crate::wire::{encode, FrameW, Node, PoseW, ProbeW, MAX_FRAME};
+    use crate::wire::{encode, FrameW, Node, PoseW, ProbeW, MAGIC, MAX_FRAME, VERSION};
 
     fn f(rng: &mut Rng) -> f32 {
         match rng.below(8) {

@@ -1,0 +1,390 @@
+//! The message types of the protocol, each with its maximum encoded size derived next
+//! to it (postcard's worst case per primitive), the direction maxima
+//! ([`MAX_TO_CONTROLLER`], [`MAX_FROM_CONTROLLER`]) and the `const` assertions on them,
+//! and [`error_code`], the compact code of a core error that NACKs and faults carry.
+//! Nothing here knows how a message is framed ([`super::framing`]).
+
+use crate::limits::MAX_FRAME_PIXELS;
+use serde::{Deserialize, Serialize};
+
+/// Protocol magic, ASCII "RBRG" read as a little-endian `u32`.
+pub const MAGIC: u32 = u32::from_le_bytes(*b"RBRG");
+/// Protocol version; bumped on any change of a message's encoding.
+pub const VERSION: u16 = 1;
+
+/// Pixels travel as `u16` in 1/16 pixel: up to 4095.94 px at 0.0625 px resolution.
+pub const PIXEL_SUBDIVISIONS: f32 = 16.0;
+/// Template SOM-1 nodes per upload chunk (400 nodes in 13 chunks).
+pub const NODES_PER_CHUNK: usize = 32;
+/// Waypoints per upload chunk and per plan.
+pub const WAYPOINTS_PER_CHUNK: usize = 8;
+/// Most planned waypoints.
+pub const MAX_WAYPOINTS: usize = 32;
+
+// Worst-case postcard sizes of the primitives (varints: 7 bits a byte).
+const U8: usize = 1;
+pub(super) const U16: usize = 3;
+const U32: usize = 5;
+const I32: usize = 5;
+const U64: usize = 10;
+const F32: usize = 4;
+/// An enum discriminant below 128, or a sequence length below 128.
+const TAG: usize = 1;
+
+/// A point or vector, mm.
+pub type P3 = [f32; 3];
+/// A rigid transform on the wire: rotation row-major (9) then translation (3).
+pub type RigidW = [f32; 12];
+
+/// Probe image geometry: the core's [`crate::acquisition::probe::ProbeModel`] itself.
+pub use crate::acquisition::probe::ProbeModel as ProbeW;
+const PROBE_W: usize = 2 * U16 + 2 * F32;
+
+/// Sweep and motion configuration.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Configure {
+    /// Probe image geometry.
+    pub probe: ProbeW,
+    /// Image frame in the TCP frame.
+    pub tcp_t_us: RigidW,
+    /// TCP frame in the flange frame.
+    pub ee_t_tcp: RigidW,
+    /// Video lag behind the tracker, µs.
+    pub lag_us: i32,
+    /// Finest voxel edge of the compounding, mm.
+    pub voxel_mm: f32,
+    /// Setpoint speed limit, mm/s.
+    pub max_speed_mm_s: f32,
+    /// Setpoint acceleration limit, mm/s².
+    pub max_accel_mm_s2: f32,
+    /// Distance of the probe face from the bone surface at a waypoint, mm.
+    pub standoff_mm: f32,
+}
+const CONFIGURE: usize = PROBE_W + 24 * F32 + I32 + 4 * F32;
+
+/// One template SOM-1 node and its rib label (0 none, 1 sternum, 2..=5 rib).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Node {
+    /// Position, template (patient) frame, mm.
+    pub p: P3,
+    /// Rib label.
+    pub label: u8,
+}
+const NODE: usize = 3 * F32 + U8;
+
+/// The template's shape: frame of its key points, rib skeleton, sternum split.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TemplateShape {
+    /// Frame origin, mm.
+    pub origin: P3,
+    /// Frame axes (columns), row-major.
+    pub axes: [f32; 9],
+    /// Spread along each axis, mm.
+    pub spread: P3,
+    /// The 30 rib skeleton points (ribs 2..5: 6, 6, 8, 10).
+    pub skeleton: [P3; 30],
+    /// Per rib, the fraction of its stations on side 0.
+    pub midline_fraction: [f32; 4],
+}
+const TEMPLATE_SHAPE: usize = (3 + 9 + 3 + 90 + 4) * F32;
+
+/// A tracked flange pose `b_T_ee`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PoseW {
+    /// Tracker time, µs.
+    pub t_us: u64,
+    /// Position, mm.
+    pub position: P3,
+    /// Orientation `[w, x, y, z]`.
+    pub quat: [f32; 4],
+}
+const POSE_W: usize = U64 + 7 * F32;
+
+/// One annotated US frame.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FrameW {
+    /// Video time, µs.
+    pub t_us: u64,
+    /// Frame number.
+    pub frame: u32,
+    /// Bone pixels `(u, v)` in 1/[`PIXEL_SUBDIVISIONS`] pixel.
+    pub pixels: heapless::Vec<[u16; 2], MAX_FRAME_PIXELS>,
+}
+const FRAME_W: usize = U64 + U32 + TAG + MAX_FRAME_PIXELS * 2 * U16;
+
+/// Commands of the procedure.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Command {
+    /// Start compounding poses and frames.
+    StartSweep,
+    /// Stop compounding.
+    EndSweep,
+    /// Register the template onto the compounded cloud.
+    Register,
+    /// Move the probe through the mapped waypoints.
+    Execute,
+    /// Stop everything, back to idle (the template is kept).
+    Abort,
+    /// Send a status.
+    Status,
+    /// Send the registration result (one message per waypoint).
+    Result,
+    /// Send the controller's measured costs ([`FromController::Cost`]).
+    Cost,
+}
+
+/// Robot PC → controller.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum ToController {
+    /// Handshake: must be the first message, sequence 0.
+    Hello {
+        /// [`MAGIC`].
+        magic: u32,
+        /// [`VERSION`].
+        version: u16,
+    },
+    /// Calibration, lag and motion limits.
+    Configure(Configure),
+    /// A chunk of template nodes.
+    TemplateNodes {
+        /// Index of the first node of this chunk.
+        offset: u16,
+        /// Nodes in the whole template.
+        total: u16,
+        /// The nodes.
+        nodes: heapless::Vec<Node, NODES_PER_CHUNK>,
+    },
+    /// The template's shape (after its nodes).
+    TemplateShape(TemplateShape),
+    /// A chunk of planned waypoints (template frame).
+    Waypoints {
+        /// Index of the first waypoint of this chunk.
+        offset: u8,
+        /// Waypoints in the whole plan.
+        total: u8,
+        /// The waypoints, mm.
+        points: heapless::Vec<P3, WAYPOINTS_PER_CHUNK>,
+    },
+    /// A tracked pose (100 Hz).
+    Pose(PoseW),
+    /// An annotated frame (30 fps).
+    Frame(FrameW),
+    /// A command.
+    Command(Command),
+}
+
+/// Largest encoded [`ToController`]: the frame message.
+pub const MAX_TO_CONTROLLER: usize = TAG
+    + max(
+        max(U32 + U16, CONFIGURE),
+        max(
+            max(2 * U16 + TAG + NODES_PER_CHUNK * NODE, TEMPLATE_SHAPE),
+            max(
+                2 * U8 + TAG + WAYPOINTS_PER_CHUNK * 3 * F32,
+                max(POSE_W, max(FRAME_W, TAG)),
+            ),
+        ),
+    );
+
+/// Controller states (see `controller`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum State {
+    /// Waiting for a template (and configuration).
+    Idle,
+    /// Template and configuration loaded.
+    TemplateLoaded,
+    /// Compounding poses and frames.
+    Sweeping,
+    /// Registering (incrementally).
+    Registering,
+    /// Waypoints mapped.
+    Ready,
+    /// Streaming setpoints.
+    Executing,
+    /// Every waypoint visited.
+    Done,
+}
+
+/// Why a frame or a message was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum NackCode {
+    /// The frame failed COBS, CRC or decoding.
+    Corrupt,
+    /// A sequence number was skipped (something was lost).
+    OutOfOrder,
+    /// The frame was longer than [`MAX_FRAME`](super::MAX_FRAME).
+    TooLong,
+    /// Wrong magic or version in the handshake, or no handshake yet.
+    Version,
+    /// The message is not allowed in the current state.
+    BadState,
+    /// The message's content was refused; the code is [`error_code`] of the core error.
+    Invalid(u8),
+}
+
+/// Controller faults, reported unprompted.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Fault {
+    /// No robot pose for more than the timeout while executing: setpoints stopped.
+    PoseTimeout,
+    /// Registration failed; the code is [`error_code`] of the core error.
+    Registration(u8),
+}
+
+/// Controller status.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct StatusW {
+    /// State.
+    pub state: State,
+    /// Sequence number expected next from the host.
+    pub expected_seq: u16,
+    /// Poses accepted.
+    pub poses: u32,
+    /// Frames placed in the cloud.
+    pub frames_placed: u32,
+    /// Frames refused (outside the track or invalid).
+    pub frames_refused: u32,
+    /// Points in the cloud (voxels).
+    pub points: u16,
+    /// Registration progress, percent.
+    pub progress: u8,
+    /// Waypoint being approached while executing.
+    pub waypoint: u8,
+}
+const STATUS_W: usize = TAG + U16 + 3 * U32 + U16 + 2 * U8;
+
+/// One mapped waypoint of the registration result.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WaypointW {
+    /// Index in the plan.
+    pub index: u8,
+    /// Waypoints in the plan.
+    pub total: u8,
+    /// Mapped position, robot base frame, mm.
+    pub position: P3,
+    /// Quality: RMS residual of the local rigid fit that mapped it, mm (lower is better).
+    pub quality_mm: f32,
+}
+const WAYPOINT_W: usize = 2 * U8 + 4 * F32;
+
+/// A probe setpoint: TCP pose in the robot base frame.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SetpointW {
+    /// Controller time, µs.
+    pub t_us: u64,
+    /// TCP position, mm.
+    pub position: P3,
+    /// TCP orientation `[w, x, y, z]`.
+    pub quat: [f32; 4],
+    /// Waypoint being approached.
+    pub waypoint: u8,
+}
+const SETPOINT_W: usize = U64 + 7 * F32 + U8;
+
+/// What the controller's work costs on its platform (instructions counted by the
+/// firmware; the in-process controller reports zeros).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct CostW {
+    /// Instructions spent in registration steps, the last registration.
+    pub registration_instructions: u64,
+    /// Registration steps (calls) of the last registration.
+    pub registration_calls: u32,
+    /// Most instructions one control-loop call took (message handling, poll, replies).
+    pub worst_call_instructions: u32,
+    /// Most instructions one registration step took.
+    pub worst_step_instructions: u32,
+    /// Most instructions handling one received frame took.
+    pub worst_receive_instructions: u32,
+    /// Peak stack use, bytes.
+    pub peak_stack_bytes: u32,
+}
+const COST_W: usize = U64 + 5 * U32;
+
+/// Controller → robot PC.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum FromController {
+    /// Handshake answer.
+    HelloAck {
+        /// [`MAGIC`].
+        magic: u32,
+        /// [`VERSION`].
+        version: u16,
+        /// [`MAX_FRAME`](super::MAX_FRAME) of the controller.
+        max_frame: u16,
+    },
+    /// A host message was applied (or was a duplicate of one applied).
+    Ack {
+        /// Its sequence number.
+        seq: u16,
+    },
+    /// A host frame was refused.
+    Nack {
+        /// The sequence number the controller expects next (re-send from it).
+        seq: u16,
+        /// Why.
+        code: NackCode,
+    },
+    /// Status.
+    Status(StatusW),
+    /// One mapped waypoint.
+    Waypoint(WaypointW),
+    /// A setpoint (100 Hz while executing).
+    Setpoint(SetpointW),
+    /// A fault.
+    Fault(Fault),
+    /// Measured costs (zero where the platform does not measure them).
+    Cost(CostW),
+}
+
+/// Largest encoded [`FromController`].
+pub const MAX_FROM_CONTROLLER: usize = TAG
+    + max(
+        max(U32 + 2 * U16, U16),
+        max(
+            U16 + 2 * TAG,
+            max(
+                STATUS_W,
+                max(WAYPOINT_W, max(SETPOINT_W, max(2 * TAG, COST_W))),
+            ),
+        ),
+    );
+
+const _: () = assert!(MAX_TO_CONTROLLER == 593);
+
+pub(super) const fn max(a: usize, b: usize) -> usize {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
+/// A compact code for a core error (for NACKs and faults): its variant's position.
+pub fn error_code(e: &crate::error::Error) -> u8 {
+    use crate::error::Error as E;
+    match e {
+        E::TooFewPoints { .. } => 1,
+        E::TooManyPoints { .. } => 2,
+        E::NonFinite { .. } => 3,
+        E::OutOfRange { .. } => 4,
+        E::Degenerate { .. } => 5,
+        E::LabelCount { .. } => 6,
+        E::Endpoints { .. } => 7,
+        E::RibOrder { .. } => 8,
+        E::RibPath { .. } => 9,
+        E::RigidFit => 10,
+        E::Capacity { .. } => 11,
+        E::Config(_) => 12,
+        E::TooFewSamples { .. } => 13,
+        E::Sample { .. } => 14,
+        E::Swing { .. } => 15,
+        E::Correlation { .. } => 16,
+        E::OutsideTrack { .. } => 17,
+        E::TrackGap { .. } => 18,
+        E::Pixel { .. } => 19,
+    }
+}
