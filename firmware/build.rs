@@ -9,6 +9,7 @@
 use std::{env, fs, path::PathBuf};
 
 fn main() {
+    // Note(unwrap): cargo always sets CARGO_MANIFEST_DIR for a build script.
     let manifest_dir = PathBuf::from(env::var_os("CARGO_MANIFEST_DIR").expect("set by cargo"));
     let memory_x = manifest_dir.join("..").join("memory.x");
     println!("cargo:rerun-if-changed={}", memory_x.display());
@@ -18,7 +19,9 @@ fn main() {
         return;
     }
 
+    // Note(unwrap): cargo always sets OUT_DIR for a build script.
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("set by cargo"));
+    // Note(unwrap): a missing or unwritable memory.x must fail the build, with the path.
     let contents =
         fs::read(&memory_x).unwrap_or_else(|e| panic!("cannot read {}: {e}", memory_x.display()));
     fs::write(out.join("memory.x"), contents).expect("write memory.x into OUT_DIR");

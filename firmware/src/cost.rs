@@ -198,6 +198,12 @@ mod target {
         }
     }
 
+    /// The controller's clock, µs since [`Cost::init`] (SysTick at [`CORE_CLOCK_HZ`]).
+    #[inline]
+    pub fn now_us() -> u64 {
+        now_ticks() / u64::from(CORE_CLOCK_HZ / 1_000_000)
+    }
+
     /// Executes exactly `2 * iterations` instructions in its loop (`subs` + `bne`), plus
     /// the call around it: the known workload that calibrates the counter.
     #[inline(never)]
@@ -257,84 +263,9 @@ mod target {
     }
 }
 
-/// Instructions of the registration's calls per stage (`Controller::registration_stage`):
-/// calls, total and worst call, logged at `QUIT`.
-pub struct StageCosts {
-    rows: [(&'static str, u32, u64, u64); STAGES],
-    len: usize,
-}
-
-/// Distinct stage names kept (the registration has 16; more are counted as the last).
-pub const STAGES: usize = 20;
-
-impl StageCosts {
-    /// No calls yet.
-    pub const fn new() -> Self {
-        StageCosts {
-            rows: [("", 0, 0, 0); STAGES],
-            len: 0,
-        }
-    }
-
-    /// Counts one call of `n` instructions in `stage`.
-    pub fn add(&mut self, stage: &'static str, n: u64) {
-        let i = match self.rows[..self.len].iter().position(|r| r.0 == stage) {
-            Some(i) => i,
-            None if self.len < STAGES => {
-                self.len += 1;
-                self.rows[self.len - 1].0 = stage;
-                self.len - 1
-            }
-            None => STAGES - 1,
-        };
-        let row = &mut self.rows[i];
-        row.1 = row.1.saturating_add(1);
-        row.2 = row.2.saturating_add(n);
-        row.3 = row.3.max(n);
-    }
-
-    /// The rows: stage, calls, total and worst instructions.
-    pub fn rows(&self) -> &[(&'static str, u32, u64, u64)] {
-        &self.rows[..self.len]
-    }
-
-    /// Logs every row through defmt.
-    #[cfg(target_os = "none")]
-    pub fn log(&self) {
-        for &(stage, calls, total, worst) in self.rows() {
-            defmt::info!(
-                "registration stage {=str}: {=u32} calls, {=u64} instructions, worst call {=u64}",
-                stage,
-                calls,
-                total,
-                worst
-            );
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn stage_costs_keep_calls_totals_and_worst_per_stage() {
-        let mut s = StageCosts::new();
-        s.add("som", 10);
-        s.add("fit", 7);
-        s.add("som", 30);
-        assert_eq!(s.rows(), &[("som", 2, 40, 30), ("fit", 1, 7, 7)]);
-        // More names than rows: the last row takes the rest.
-        let names = [
-            "a", "b", "c", "d", "e", "f", "g", "h", "i", "j", "k", "l", "m", "n", "o", "p", "q",
-            "r", "s", "t", "u", "v", "w", "x",
-        ];
-        assert!(names.len() > STAGES);
-        for k in 0..2 * STAGES {
-            s.add(names[k % names.len()], 1);
-        }
-        assert_eq!(s.rows().len(), STAGES);
-    }
 
     #[test]
     fn ticks_count_down_within_a_period() {
