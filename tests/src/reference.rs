@@ -829,7 +829,7 @@ pub fn median_u(uv: &[P2]) -> f64 {
     }
     let mut us: Vec<f64> = uv.iter().map(|q| q[0]).collect();
     us.sort_by(f64::total_cmp);
-    if n % 2 == 0 {
+    if n.is_multiple_of(2) {
         (us[n / 2 - 1] + us[n / 2]) / 2.0
     } else {
         us[n / 2]

@@ -623,7 +623,7 @@ fn kabsch_agrees() {
             [80.0, 50.0, 30.0],
         ));
         let (axis, mut deg) = random_rotation(&mut rng);
-        if case % 10 == 0 {
+        if case.is_multiple_of(10) {
             deg = 179.9;
         }
         let t = [
@@ -632,7 +632,7 @@ fn kabsch_agrees() {
             rng.uniform(-200.0, 200.0),
         ];
         let m = rigid64(axis, deg, t);
-        let noise = if case % 3 == 0 { 0.5 } else { 0.0 };
+        let noise = if case.is_multiple_of(3) { 0.5 } else { 0.0 };
         let mut b: Vec<P3> = a.iter().map(|p| m.apply(*p)).collect();
         if noise > 0.0 {
             for p in &mut b {
@@ -641,7 +641,7 @@ fn kabsch_agrees() {
                 }
             }
         }
-        if case % 7 == 0 {
+        if case.is_multiple_of(7) {
             // Mirror image: the best proper rotation is unique when the spreads differ.
             b = a.iter().map(|p| [p[0], p[1], -p[2]]).collect();
         }

@@ -316,7 +316,7 @@ fn median_u(uv: &[Vec2]) -> f32 {
     us.sort_unstable_by(f32::total_cmp);
     match n {
         0 => 0.0,
-        _ if n % 2 == 0 => 0.5 * (us[n / 2 - 1] + us[n / 2]),
+        _ if n.is_multiple_of(2) => 0.5 * (us[n / 2 - 1] + us[n / 2]),
         _ => us[n / 2],
     }
 }

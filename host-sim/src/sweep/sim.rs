@@ -98,7 +98,11 @@ impl ScanPath {
         let mut corners = Vec::with_capacity(2 * lines);
         for k in 0..lines {
             let y = y0 - k as f64 * spacing;
-            let (a, b) = if k % 2 == 0 { (x0, x1) } else { (x1, x0) };
+            let (a, b) = if k.is_multiple_of(2) {
+                (x0, x1)
+            } else {
+                (x1, x0)
+            };
             corners.push([a, y]);
             corners.push([b, y]);
         }
