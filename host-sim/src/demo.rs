@@ -1,10 +1,11 @@
 //! `ribreg phantom` (write a phantom pair to files) and `ribreg demo` (the README's main
 //! job: build the default phantom pair, register it, compare with the ground truth).
 
+use crate::error::CliError;
 use crate::io::{self, Cloud, Mesh, PlyFormat};
 use crate::phantom::{PhantomConfig, PhantomPair};
 use crate::plot::{self, SkeletonPanels};
-use crate::register::{register_clouds, to_core, to_file, CliError, Method};
+use crate::register::{register_clouds, to_core, to_file, Method};
 use ribreg_core::config::RIB_SAMPLES;
 use ribreg_core::error::Cloud as Which;
 use ribreg_core::math::geom::Rigid;
@@ -18,11 +19,10 @@ use std::time::Instant;
 /// `template_mesh.ply` and `.obj`, `target.ply`, `waypoints.csv` (planned, template frame),
 /// `true_waypoints.csv` (ground truth, target frame) and `params.json`.
 pub fn write_phantom(pair: &PhantomPair, dir: &Path) -> Result<(), CliError> {
-    std::fs::create_dir_all(dir).map_err(|e| {
-        CliError::Usage(format!(
-            "{}: cannot create the directory: {e}",
-            dir.display()
-        ))
+    std::fs::create_dir_all(dir).map_err(|source| io::IoError::Io {
+        path: dir.to_owned(),
+        op: "cannot create the directory",
+        source,
     })?;
     let template = Cloud {
         points: pair.template.points.clone(),
@@ -50,7 +50,7 @@ pub fn write_phantom(pair: &PhantomPair, dir: &Path) -> Result<(), CliError> {
     io::write_points_csv(&dir.join("waypoints.csv"), &pair.template_waypoints)?;
     io::write_points_csv(&dir.join("true_waypoints.csv"), &pair.true_waypoints)?;
     let params = serde_json::to_string_pretty(&pair.write_params_json())
-        .map_err(|e| CliError::Usage(format!("params: {e}")))?;
+        .map_err(|e| CliError::Output(format!("params: {e}")))?;
     io::write_text(&dir.join("params.json"), &params)?;
     Ok(())
 }
@@ -134,7 +134,7 @@ pub fn run_demo(
     )?;
     io::write_points_csv(&out.join("mapped_waypoints.csv"), &to_file(&mapped))?;
     let text = serde_json::to_string_pretty(&outcome.report)
-        .map_err(|e| CliError::Usage(format!("report: {e}")))?;
+        .map_err(|e| CliError::Output(format!("report: {e}")))?;
     io::write_text(&out.join("report.json"), &text)?;
     let mine = vec![(format!("ribreg ({})", method.name()), to_file(&mapped))];
     write_figures(
@@ -210,7 +210,7 @@ pub fn write_figures(
     truth: &[[f64; 3]],
     methods: &[(String, Vec<[f64; 3]>)],
 ) -> Result<(), CliError> {
-    let fig = |e: plot::PlotError| CliError::Usage(format!("figure: {e}"));
+    let fig = |e: plot::PlotError| CliError::Output(format!("figure: {e}"));
     let tpl = &outcome.template;
     let reg = &outcome.registration;
     let panels = skeleton_panels(template, &tpl.graph, &tpl.skeleton, &Rigid::identity());

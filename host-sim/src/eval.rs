@@ -4,10 +4,11 @@
 
 use crate::baselines;
 use crate::demo::write_figures;
+use crate::error::CliError;
 use crate::io;
 use crate::phantom::{PhantomConfig, PhantomPair, Variant};
 use crate::plot::{self, Series};
-use crate::register::{register_clouds, to_core, to_file, CliError, Method};
+use crate::register::{register_clouds, to_core, to_file, Method};
 use crate::stats::{paired_t_test, Summary};
 use ribreg_core::error::Cloud as Which;
 use ribreg_core::registration::metrics::compare;
@@ -189,11 +190,10 @@ pub fn run_eval(
     out: &Path,
     progress: &mut (dyn FnMut(&str) + Send),
 ) -> Result<String, CliError> {
-    std::fs::create_dir_all(out).map_err(|e| {
-        CliError::Usage(format!(
-            "{}: cannot create the directory: {e}",
-            out.display()
-        ))
+    std::fs::create_dir_all(out).map_err(|source| io::IoError::Io {
+        path: out.to_owned(),
+        op: "cannot create the directory",
+        source,
     })?;
     let cases: Vec<(Variant, u64)> = cfg
         .variants
@@ -244,7 +244,7 @@ pub fn run_eval(
     let json = json!({ "pairs": cfg.pairs, "methods": cfg.methods.iter().map(|m| m.name()).collect::<Vec<_>>(),
         "summary": summary_json(cfg, &results), "cases": results });
     let text = serde_json::to_string_pretty(&json)
-        .map_err(|e| CliError::Usage(format!("results: {e}")))?;
+        .map_err(|e| CliError::Output(format!("results: {e}")))?;
     io::write_text(&out.join("results.json"), &text)?;
     figures(cfg, &results, out)?;
     Ok(table)
@@ -401,7 +401,7 @@ fn markdown(cfg: &EvalConfig, results: &[CaseResult]) -> String {
 }
 
 fn figures(cfg: &EvalConfig, results: &[CaseResult], out: &Path) -> Result<(), CliError> {
-    let fig = |e: plot::PlotError| CliError::Usage(format!("figure: {e}"));
+    let fig = |e: plot::PlotError| CliError::Output(format!("figure: {e}"));
     for &v in &cfg.variants {
         let v = variant_name(v);
         let series: Vec<Series> = cfg

@@ -6,7 +6,7 @@
 //! only with the clouds themselves (measured: 200,000 + 200,000 points register in well
 //! under a second, see the README).
 
-use crate::io::{self, Cloud, IoError, PlyFormat};
+use crate::io::{self, Cloud, PlyFormat};
 use ribreg_core::config::{Config, RIBS, RIB_SAMPLES};
 use ribreg_core::error::Cloud as Which;
 use ribreg_core::registration::anterior;
@@ -17,7 +17,6 @@ use ribreg_core::registration::pipeline::{register, Registration, Template};
 use ribreg_core::limits::MAX_COORD_MM;
 use ribreg_core::{Error, Vec3};
 use serde_json::{json, Value};
-use std::fmt;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -83,40 +82,7 @@ pub struct RegisterJob {
     pub method: Method,
 }
 
-/// Why a command failed: one line for stderr.
-#[derive(Debug)]
-pub enum CliError {
-    /// Reading or writing a file failed.
-    Io(IoError),
-    /// The core refused the data.
-    Core(Error),
-    /// Arguments that cannot work together.
-    Usage(String),
-}
-
-impl fmt::Display for CliError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            CliError::Io(e) => write!(f, "{e}"),
-            CliError::Core(e) => write!(f, "{e}"),
-            CliError::Usage(s) => f.write_str(s),
-        }
-    }
-}
-
-impl std::error::Error for CliError {}
-
-impl From<IoError> for CliError {
-    fn from(e: IoError) -> Self {
-        CliError::Io(e)
-    }
-}
-
-impl From<Error> for CliError {
-    fn from(e: Error) -> Self {
-        CliError::Core(e)
-    }
-}
+pub use crate::error::CliError;
 
 /// f64 file points → core points, with the range check done in f64 (so 1e300 is "out of
 /// range", not "infinite after the cast").
@@ -161,10 +127,12 @@ pub fn to_core_labels(path: &Path, labels: &Option<Vec<i32>>) -> Result<Option<V
         .enumerate()
         .map(|(i, &l)| {
             u8::try_from(l).ok().filter(|l| *l <= 5).ok_or_else(|| {
-                CliError::Usage(format!(
-                    "{}: vertex {i}: label {l} is not a rib number 2..5 (1 = sternum, 0 = unlabelled)",
-                    path.display()
-                ))
+                CliError::input(
+                    path,
+                    format!(
+                        "vertex {i}: label {l} is not a rib number 2..5 (1 = sternum, 0 = unlabelled)"
+                    ),
+                )
             })
         })
         .collect::<Result<Vec<u8>, _>>()
@@ -401,10 +369,10 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
         .transpose()?;
     if let Some(w) = &waypoints {
         if w.is_empty() {
-            return Err(CliError::Usage(format!(
-                "{}: no waypoints (only the header)",
-                job.waypoints.as_deref().unwrap_or(Path::new("")).display()
-            )));
+            return Err(CliError::input(
+                job.waypoints.as_deref().unwrap_or(Path::new("")),
+                "no waypoints (only the header)",
+            ));
         }
     }
     let t_read = t0.elapsed();
@@ -415,11 +383,11 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
         ms(t_read)
     ));
     if job.method == Method::Improved && labels.is_none() {
-        return Err(CliError::Usage(format!(
-            "{}: the improved method needs a labelled template (PLY vertex property `label`); \
+        return Err(CliError::input(
+            &job.template,
+            "the improved method needs a labelled template (PLY vertex property `label`); \
              use --method paper for an unlabelled one",
-            job.template.display()
-        )));
+        ));
     }
     let mut outcome = register_clouds(
         &tpl,
@@ -455,7 +423,7 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
             outcome.report["timings_ms"]["read"] = json!(ms(t_read));
             outcome.report["timings_ms"]["total_before_write"] = json!(ms(t0.elapsed()));
             let text = serde_json::to_string_pretty(&outcome.report)
-                .map_err(|e| CliError::Usage(format!("report: {e}")))?;
+                .map_err(|e| CliError::Output(format!("report: {e}")))?;
             io::write_text(path, &text)?;
             written.push(path);
         }

@@ -34,9 +34,9 @@ use ribreg_core::math::rng::Rng;
 use ribreg_core::{Error, Vec3};
 use serde::{Deserialize, Serialize};
 
-use crate::io::{self, Cloud, PlyFormat};
+use crate::error::CliError;
+use crate::io::{self, Cloud, IoError, PlyFormat};
 use crate::phantom::{PhantomConfig, PhantomPair, Pose, SubjectGeometry, MESH_EDGE_MM};
-use crate::register::CliError;
 
 pub(crate) mod sim;
 
@@ -115,7 +115,7 @@ impl SweepConfig {
     /// Checks ranges: positive spacing, speed and rates, lag within ±1 s, rates below
     /// 10 kHz, probabilities in [0, 1), non-negative noises.
     pub fn validate(&self) -> Result<(), CliError> {
-        let bad = |what: &str| Err(CliError::Usage(format!("sweep: {what}")));
+        let bad = |what: &str| Err(CliError::value(format!("sweep: {what}")));
         let pos = |v: f64| v.is_finite() && v > 0.0;
         let nonneg = |v: f64| v.is_finite() && v >= 0.0;
         if !(self.lag_ms.is_finite() && self.lag_ms.abs() <= 1000.0) {
@@ -216,12 +216,15 @@ impl ProbeFile {
 
     /// Reads and validates `probe.json`.
     pub fn read(path: &Path) -> Result<Calibration, CliError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| CliError::Usage(format!("{}: cannot read: {e}", path.display())))?;
-        let file: ProbeFile = serde_json::from_str(&text)
-            .map_err(|e| CliError::Usage(format!("{}: {e}", path.display())))?;
+        let text = std::fs::read_to_string(path).map_err(|source| IoError::Io {
+            path: path.to_owned(),
+            op: "cannot read",
+            source,
+        })?;
+        let file: ProbeFile =
+            serde_json::from_str(&text).map_err(|e| CliError::input(path, e.to_string()))?;
         file.calibration()
-            .map_err(|e| CliError::Usage(format!("{}: {e}", path.display())))
+            .map_err(|e| CliError::input(path, e.to_string()))
     }
 }
 
@@ -286,12 +289,14 @@ pub fn read_frames(path: &Path) -> Result<Vec<FrameRow>, CliError> {
         .enumerate()
         .map(|(i, r)| {
             if r[0].fract() != 0.0 || !(0.0..=f64::from(u32::MAX)).contains(&r[0]) {
-                return Err(CliError::Usage(format!(
-                    "{}: row {}: frame number {} is not a whole number ≥ 0",
-                    path.display(),
-                    i + 1,
-                    r[0]
-                )));
+                return Err(CliError::input(
+                    path,
+                    format!(
+                        "row {}: frame number {} is not a whole number ≥ 0",
+                        i + 1,
+                        r[0]
+                    ),
+                ));
             }
             Ok(FrameRow {
                 frame: r[0] as u32,
@@ -346,7 +351,7 @@ pub fn compound(
                 .last_mut()
                 .expect("a group exists after the first row");
             if g.0 != f.t {
-                return Err(CliError::Usage(format!(
+                return Err(CliError::value(format!(
                     "frames: row {}: frame {} has two time stamps ({} and {})",
                     i + 1,
                     f.frame,
@@ -558,7 +563,7 @@ impl SweepLogs {
     pub fn write(&self, dir: &Path) -> Result<(), CliError> {
         crate::demo::write_phantom(&self.pair, dir)?;
         let probe = serde_json::to_string_pretty(&ProbeFile::from_calibration(&self.calibration))
-            .map_err(|e| CliError::Usage(format!("probe.json: {e}")))?;
+            .map_err(|e| CliError::Output(format!("probe.json: {e}")))?;
         io::write_text(&dir.join("probe.json"), &probe)?;
         let poses: Vec<[f64; 8]> = self.poses.iter().map(PoseRow::row).collect();
         io::write_table_csv(&dir.join("poses.csv"), POSE_COLUMNS, &poses)?;
@@ -579,7 +584,7 @@ impl SweepLogs {
             &self.calib_video,
         )?;
         let summary = serde_json::to_string_pretty(&self.summary)
-            .map_err(|e| CliError::Usage(format!("sweep.json: {e}")))?;
+            .map_err(|e| CliError::Output(format!("sweep.json: {e}")))?;
         io::write_text(&dir.join("sweep.json"), &summary)?;
         Ok(())
     }

@@ -2,7 +2,7 @@
 //! waypoint within the clinical tolerance, each link fault survived with nothing lost or
 //! applied twice, and the pose watchdog.
 
-use ribreg_sim::hil::{self, Faults, HilReport, InProcess, RunOptions, Session};
+use ribreg_sim::hil::{self, FaultInjector, Faults, HilReport, InProcess, RunOptions, Session};
 use ribreg_sim::phantom::PhantomConfig;
 
 fn run(faults: Option<Faults>, options: RunOptions) -> HilReport {
@@ -11,13 +11,19 @@ fn run(faults: Option<Faults>, options: RunOptions) -> HilReport {
         sweep: RunOptions::quick().sweep,
         ..options
     };
-    let mut session = Session::new(InProcess::new(), faults.map(|f| (f, 5)));
-    hil::run_with(
-        &mut session,
-        &PhantomConfig::default(),
-        options,
-        &mut |_| {},
-    )
+    let phantom = PhantomConfig::default();
+    match faults {
+        Some(f) => {
+            let mut session = Session::new(FaultInjector::new(InProcess::new(), f, 5));
+            hil::run_with(&mut session, &phantom, options, &mut |_| {})
+        }
+        None => hil::run_with(
+            &mut Session::new(InProcess::new()),
+            &phantom,
+            options,
+            &mut |_| {},
+        ),
+    }
     .unwrap()
 }
 

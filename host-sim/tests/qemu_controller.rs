@@ -9,7 +9,7 @@
 use ribreg_core::wire::{
     self, Command, FromController, NackCode, State, ToController, MAGIC, MAX_FRAME, VERSION,
 };
-use ribreg_sim::qemu::{self, Emulator, Icount, Options, QemuError};
+use ribreg_sim::hil::emulator::{self as qemu, Emulator, Icount, Options, QemuError};
 use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};

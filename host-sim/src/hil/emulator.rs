@@ -1,4 +1,4 @@
-//! Runs the firmware under QEMU and talks to it over its emulated UART.
+//! The emulator: runs the firmware under QEMU and talks to it over its emulated UART.
 //!
 //! [`Emulator::start`] spawns
 //!
@@ -140,6 +140,30 @@ pub enum QemuError {
         /// The path looked at.
         path: PathBuf,
     },
+    /// The firmware ELF lacks what was looked for in it (a 32-bit little-endian ELF with
+    /// its symbol table).
+    Elf {
+        /// The ELF.
+        path: PathBuf,
+        /// What is missing or malformed.
+        what: String,
+    },
+    /// The procedure failed while the emulator ran (or after it stopped).
+    Failed {
+        /// What failed.
+        during: String,
+        /// The emulator's state then (`wait`'s result).
+        status: String,
+        /// What QEMU printed on stderr.
+        stderr: String,
+    },
+    /// The firmware exited with a failure status (a panic or a semihosting failure exit).
+    Unclean {
+        /// QEMU's exit status.
+        status: ExitStatus,
+        /// What QEMU printed on stderr.
+        stderr: String,
+    },
 }
 
 impl fmt::Display for QemuError {
@@ -172,6 +196,16 @@ impl fmt::Display for QemuError {
                 "`{command}` failed ({status}); the firmware needs `rustup target add \
                  thumbv7em-none-eabihf` and `cargo install flip-link --locked`:\n{}",
                 stderr.trim()
+            ),
+            Self::Elf { path, what } => write!(f, "{}: {what}", path.display()),
+            Self::Failed {
+                during,
+                status,
+                stderr,
+            } => write!(f, "{during}; the emulator: {status}, {stderr}"),
+            Self::Unclean { status, stderr } => write!(
+                f,
+                "the firmware did not exit cleanly ({status}); QEMU said: {stderr}"
             ),
             Self::MissingElf { path } => write!(
                 f,
@@ -516,6 +550,57 @@ pub fn build_firmware() -> Result<PathBuf, QemuError> {
     } else {
         Err(QemuError::MissingElf { path })
     }
+}
+
+/// The firmware's stack region, bytes: `_stack_start − _stack_end` from the ELF's symbol
+/// table — the linker symbols the firmware itself reads for the size it logs at boot
+/// (`stack lo..hi (N B)`) and at `QUIT` (`peak stack P of N B`).
+pub fn stack_size_bytes(elf: &Path) -> Result<u32, QemuError> {
+    let bytes = std::fs::read(elf).map_err(io_error(format!("read {}", elf.display())))?;
+    let bad = |what: &str| QemuError::Elf {
+        path: elf.to_owned(),
+        what: what.to_owned(),
+    };
+    let start =
+        elf32_symbol(&bytes, "_stack_start").ok_or_else(|| bad("no symbol _stack_start"))?;
+    let end = elf32_symbol(&bytes, "_stack_end").ok_or_else(|| bad("no symbol _stack_end"))?;
+    start
+        .checked_sub(end)
+        .ok_or_else(|| bad("_stack_start lies below _stack_end"))
+}
+
+/// The value of symbol `name` in a 32-bit little-endian ELF (its `.symtab`), if any.
+fn elf32_symbol(elf: &[u8], name: &str) -> Option<u32> {
+    let u16_at = |o: usize| Some(u16::from_le_bytes(elf.get(o..o + 2)?.try_into().ok()?));
+    let u32_at = |o: usize| Some(u32::from_le_bytes(elf.get(o..o + 4)?.try_into().ok()?));
+    // ELFCLASS32, ELFDATA2LSB.
+    if elf.get(..6)? != b"\x7fELF\x01\x01" {
+        return None;
+    }
+    let shoff = u32_at(0x20)? as usize;
+    let shentsize = usize::from(u16_at(0x2E)?);
+    let shnum = usize::from(u16_at(0x30)?);
+    let section = |i: usize| shoff + i * shentsize;
+    for i in 0..shnum {
+        const SHT_SYMTAB: u32 = 2;
+        let sh = section(i);
+        if u32_at(sh + 4)? != SHT_SYMTAB {
+            continue;
+        }
+        let (offset, size) = (u32_at(sh + 16)? as usize, u32_at(sh + 20)? as usize);
+        let entsize = (u32_at(sh + 36)? as usize).max(16);
+        let strtab = section(u32_at(sh + 24)? as usize);
+        let str_offset = u32_at(strtab + 16)? as usize;
+        for sym in (offset..offset + size).step_by(entsize) {
+            let at = str_offset + u32_at(sym)? as usize;
+            let rest = elf.get(at..)?;
+            let len = rest.iter().position(|&b| b == 0)?;
+            if &rest[..len] == name.as_bytes() {
+                return u32_at(sym + 4);
+            }
+        }
+    }
+    None
 }
 
 #[cfg(test)]

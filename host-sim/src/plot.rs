@@ -30,7 +30,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, OnceLock};
 
 /// DejaVu Sans 2.37 (licence: `host-sim/assets/DejaVuSans.LICENSE`).
-static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
+static FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
 
 /// Width of [`error_distributions`] figures (px); the height is [`ERROR_PLOT_HEIGHT`].
 pub const ERROR_PLOT_WIDTH: u32 = 1200;

@@ -1,0 +1,109 @@
+//! The `ribreg` command line: the top-level parser, the arguments several subcommands
+//! share, and the dispatch to one module per subcommand. Each subcommand's clap
+//! definitions live in its own module, next to the code they configure; adding one is a
+//! variant here and a module with its `Args` and `run`.
+
+use clap::{Parser, Subcommand};
+use ribreg_sim::error::CliError;
+use ribreg_sim::phantom::{PhantomConfig, Variant};
+use ribreg_sim::register::RegisterJob;
+
+mod calibrate;
+mod compound;
+mod demo;
+mod eval;
+mod hil;
+mod phantom;
+mod register;
+mod sample;
+
+#[derive(Parser)]
+#[command(
+    name = "ribreg",
+    version,
+    about = "Skeleton-graph US-CT rib-cartilage registration"
+)]
+pub struct Cli {
+    /// No progress lines on stderr.
+    #[arg(long, short, global = true)]
+    quiet: bool,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Register a CT template cloud onto a US target cloud and map waypoints.
+    Register(RegisterJob),
+    /// Poisson-disc sample a surface mesh (PLY, OBJ or STL) into a point cloud (PLY).
+    Sample(sample::Args),
+    /// Write a phantom pair (CT template, US target, waypoints, ground truth) to a folder,
+    /// or (`phantom sweep`) the logs of a simulated robotic sweep over it.
+    #[command(args_conflicts_with_subcommands = true)]
+    Phantom(phantom::Args),
+    /// Play the robot PC in a whole procedure against the controller (upload, sweep,
+    /// register, execute) and report where the probe ended up at each waypoint.
+    Hil(hil::Args),
+    /// Calibrate the robotic US system.
+    Calibrate(calibrate::Args),
+    /// Compound a tracked sweep (poses + annotated frames) into a US cloud (PLY).
+    Compound(compound::Args),
+    /// Build the default phantom pair, register it and compare with the ground truth.
+    Demo(demo::Args),
+    /// Run ours (paper and improved) and the baselines on phantom pairs; write tables and figures.
+    Eval(eval::Args),
+}
+
+/// What every subcommand gets besides its arguments.
+pub struct Context {
+    /// `--quiet`: no progress lines.
+    pub quiet: bool,
+}
+
+impl Context {
+    /// A progress line on stderr (`ribreg: ...`), unless quiet.
+    pub fn progress(&self, line: &str) {
+        if !self.quiet {
+            eprintln!("ribreg: {line}");
+        }
+    }
+}
+
+impl Cli {
+    /// Runs the subcommand.
+    pub fn run(self) -> Result<(), CliError> {
+        let ctx = Context { quiet: self.quiet };
+        match self.command {
+            Command::Register(job) => register::run(&job, &ctx),
+            Command::Sample(args) => sample::run(&args),
+            Command::Phantom(args) => phantom::run(&args, &ctx),
+            Command::Hil(args) => hil::run(&args, &ctx),
+            Command::Calibrate(args) => calibrate::run(&args),
+            Command::Compound(args) => compound::run(&args, &ctx),
+            Command::Demo(args) => demo::run(&args, &ctx),
+            Command::Eval(args) => eval::run(&args, &ctx),
+        }
+    }
+}
+
+/// The phantom a subcommand builds (`phantom`, `phantom sweep`, `demo`, `hil`).
+#[derive(clap::Args)]
+pub struct PhantomArgs {
+    /// Seed of the patient, noise and pose.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Pose of the US target: a few degrees/mm, or up to ~20° and ~40 mm.
+    #[arg(long, value_enum, default_value_t = Variant::Aligned)]
+    variant: Variant,
+}
+
+impl PhantomArgs {
+    /// The phantom's configuration.
+    pub fn config(&self) -> PhantomConfig {
+        PhantomConfig {
+            seed: self.seed,
+            variant: self.variant,
+            ..PhantomConfig::default()
+        }
+    }
+}

@@ -1,0 +1,93 @@
+//! `ribreg compound`: a tracked sweep (poses + annotated frames) compounded into a US
+//! cloud.
+
+use super::Context;
+use ribreg_sim::error::CliError;
+use ribreg_sim::io::IoError;
+use ribreg_sim::sweep;
+use std::path::{Path, PathBuf};
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Flange poses: CSV `t,x,y,z,qw,qx,qy,qz` (s, mm, unit quaternion), ~100 Hz.
+    #[arg(long)]
+    poses: PathBuf,
+    /// Bone pixels: CSV `frame,t,u,v` (frame number, video time s, column, row).
+    #[arg(long)]
+    frames: PathBuf,
+    /// Spatial calibration (JSON: probe, tcp_T_us, ee_T_tcp; see the README).
+    #[arg(long)]
+    probe: PathBuf,
+    /// Video lag behind the tracker, ms.
+    #[arg(
+        long,
+        required_unless_present = "lag_file",
+        conflicts_with = "lag_file",
+        allow_negative_numbers = true
+    )]
+    lag_ms: Option<f64>,
+    /// The lag as written by `ribreg calibrate temporal --json`.
+    #[arg(long)]
+    lag_file: Option<PathBuf>,
+    /// Finest voxel edge of the down-sampling, mm (the grid coarsens if it fills up).
+    #[arg(long, default_value_t = ribreg_core::acquisition::compound::DEFAULT_VOXEL_MM)]
+    voxel_mm: f32,
+    /// Output cloud (PLY, binary little-endian), robot base frame.
+    #[arg(short, long)]
+    out: PathBuf,
+}
+
+pub fn run(args: &Args, ctx: &Context) -> Result<(), CliError> {
+    let lag_ms = match (args.lag_ms, &args.lag_file) {
+        (Some(ms), _) => ms,
+        (None, Some(path)) => read_lag_ms(path)?,
+        (None, None) => return Err(CliError::Usage("give --lag-ms or --lag-file".into())),
+    };
+    let cal = sweep::ProbeFile::read(&args.probe)?;
+    let poses = sweep::read_poses(&args.poses)?;
+    let frames = sweep::read_frames(&args.frames)?;
+    ctx.progress(&format!(
+        "{} poses, {} pixel rows; lag {lag_ms} ms",
+        poses.len(),
+        frames.len()
+    ));
+    let o = sweep::compound(&cal, lag_ms * 1e-3, args.voxel_mm, &poses, &frames)?;
+    if o.points.is_empty() {
+        return Err(CliError::value(format!(
+            "no bone point was placed: {} frames outside the tracked time range, {} invalid \
+             (is the lag right, do the logs overlap in time?)",
+            o.frames.outside_track, o.frames.invalid
+        )));
+    }
+    sweep::write_cloud(&args.out, &o.points)?;
+    println!(
+        "wrote {}: {} points ({} mm voxels); frames placed {}, refused {} outside the tracked \
+         range, {} invalid; points accepted {} (merged {}), refused {} (cloud full); poses refused {}",
+        args.out.display(),
+        o.points.len(),
+        o.voxel_mm,
+        o.frames.placed,
+        o.frames.outside_track,
+        o.frames.invalid,
+        o.voxels.accepted,
+        o.voxels.merged,
+        o.voxels.refused_full,
+        o.poses_refused
+    );
+    Ok(())
+}
+
+/// `lag_ms` from the JSON `ribreg calibrate temporal --json` prints.
+fn read_lag_ms(path: &Path) -> Result<f64, CliError> {
+    let text = std::fs::read_to_string(path).map_err(|source| IoError::Io {
+        path: path.to_owned(),
+        op: "cannot read",
+        source,
+    })?;
+    let v: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| CliError::input(path, e.to_string()))?;
+    v["lag_ms"]
+        .as_f64()
+        .filter(|v| v.is_finite())
+        .ok_or_else(|| CliError::input(path, "no number \"lag_ms\""))
+}

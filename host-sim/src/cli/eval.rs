@@ -1,0 +1,70 @@
+//! `ribreg eval`: every method on phantom pairs; tables and figures.
+
+use super::Context;
+use ribreg_sim::error::CliError;
+use ribreg_sim::eval::{self, EvalConfig, EvalMethod};
+use ribreg_sim::phantom::Variant;
+use std::io::IsTerminal;
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Phantom pairs per variant (seeds 0..N).
+    #[arg(long, default_value_t = 20)]
+    pairs: u64,
+    /// Which pose variants.
+    #[arg(long, value_enum, default_value_t = Variants::Both)]
+    variants: Variants,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    jobs: Option<usize>,
+    /// Only our two methods (skip the slower baselines).
+    #[arg(long)]
+    ours_only: bool,
+    /// Output folder (created if missing).
+    #[arg(long, default_value = "out/eval")]
+    out_dir: PathBuf,
+}
+
+/// Which pose variants `eval` runs.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum Variants {
+    Both,
+    Aligned,
+    Misaligned,
+}
+
+pub fn run(args: &Args, ctx: &Context) -> Result<(), CliError> {
+    let variants = match args.variants {
+        Variants::Both => vec![Variant::Aligned, Variant::Misaligned],
+        Variants::Aligned => vec![Variant::Aligned],
+        Variants::Misaligned => vec![Variant::Misaligned],
+    };
+    let mut methods = EvalMethod::all();
+    if args.ours_only {
+        methods.retain(|m| matches!(m, EvalMethod::Ours(..)));
+    }
+    let jobs = args
+        .jobs
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let cfg = EvalConfig {
+        pairs: args.pairs,
+        variants,
+        methods,
+        jobs,
+    };
+    // Progress rewrites one line on a terminal.
+    let (quiet, tty) = (ctx.quiet, std::io::stderr().is_terminal());
+    let mut line = |l: &str| match (quiet, tty) {
+        (true, _) => {}
+        (false, true) => eprint!("\r{l}   "),
+        (false, false) => eprintln!("{l}"),
+    };
+    let r = eval::run_eval(&cfg, &args.out_dir, &mut line);
+    if tty && !quiet {
+        eprintln!();
+    }
+    let table = r?;
+    println!("{table}\nwrote {}", args.out_dir.display());
+    Ok(())
+}

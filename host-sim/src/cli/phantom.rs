@@ -1,0 +1,115 @@
+//! `ribreg phantom`: a phantom pair with its ground truth; `ribreg phantom sweep`: the
+//! logs of a simulated robotic sweep over it.
+
+use super::{Context, PhantomArgs};
+use ribreg_sim::demo;
+use ribreg_sim::error::CliError;
+use ribreg_sim::phantom::{PhantomConfig, PhantomPair};
+use ribreg_sim::sweep::{self, SweepConfig};
+use std::path::{Path, PathBuf};
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Output folder (created if missing).
+    #[arg(long, default_value = "out/phantom")]
+    out_dir: PathBuf,
+    #[command(flatten)]
+    phantom: PhantomArgs,
+    #[command(subcommand)]
+    sweep: Option<PhantomCommand>,
+}
+
+#[derive(clap::Subcommand)]
+enum PhantomCommand {
+    /// Simulate a multi-line robotic sweep over the phantom: probe calibration, pose and
+    /// frame logs, a temporal-calibration sweep, plus the phantom files.
+    Sweep {
+        /// Output folder (created if missing).
+        #[arg(long, default_value = "out/sweep")]
+        out_dir: PathBuf,
+        #[command(flatten)]
+        phantom: PhantomArgs,
+        #[command(flatten)]
+        sweep: SweepArgs,
+    },
+}
+
+#[derive(clap::Args)]
+struct SweepArgs {
+    /// Video lag behind the tracker, ms.
+    #[arg(long, default_value_t = 268.0, allow_negative_numbers = true)]
+    lag_ms: f64,
+    /// Probe speed, mm/s.
+    #[arg(long, default_value_t = 20.0)]
+    speed_mm_s: f64,
+    /// Distance between scan lines, mm.
+    #[arg(long, default_value_t = 10.0)]
+    line_spacing_mm: f64,
+    /// Annotation noise of the bone rows (SD), pixels.
+    #[arg(long, default_value_t = 2.0)]
+    pixel_noise_px: f64,
+    /// Fraction of frames lost.
+    #[arg(long, default_value_t = 0.05)]
+    miss_rate: f64,
+}
+
+impl SweepArgs {
+    fn config(&self) -> SweepConfig {
+        SweepConfig {
+            lag_ms: self.lag_ms,
+            speed_mm_s: self.speed_mm_s,
+            line_spacing_mm: self.line_spacing_mm,
+            pixel_noise_px: self.pixel_noise_px,
+            frame_miss_rate: self.miss_rate,
+            ..SweepConfig::default()
+        }
+    }
+}
+
+pub fn run(args: &Args, ctx: &Context) -> Result<(), CliError> {
+    if let Some(PhantomCommand::Sweep {
+        out_dir,
+        phantom,
+        sweep,
+    }) = &args.sweep
+    {
+        return run_sweep(&phantom.config(), &sweep.config(), out_dir, ctx);
+    }
+    let pair = PhantomPair::generate(&args.phantom.config());
+    demo::write_phantom(&pair, &args.out_dir)?;
+    println!(
+        "wrote {}: template {} points, target {} points, 10 waypoints",
+        args.out_dir.display(),
+        pair.template.points.len(),
+        pair.target.len()
+    );
+    Ok(())
+}
+
+/// Simulates a sweep over `phantom` and writes its logs to `out_dir` (also `demo --sweep`).
+pub fn run_sweep(
+    phantom: &PhantomConfig,
+    cfg: &SweepConfig,
+    out_dir: &Path,
+    ctx: &Context,
+) -> Result<(), CliError> {
+    ctx.progress("simulating the sweep");
+    let logs = sweep::simulate(phantom, cfg)?;
+    logs.write(out_dir)?;
+    let s = &logs.summary["scan"];
+    println!(
+        "wrote {}: {} scan lines in {:.0} s, {} poses, {} of {} frames with {} bone pixels; \
+         calibration sweep {} poses / {} frames; lag {} ms",
+        out_dir.display(),
+        s["lines"],
+        s["duration_s"].as_f64().unwrap_or(f64::NAN),
+        s["poses"],
+        s["frames_logged"],
+        s["frames_captured"],
+        s["pixels"],
+        logs.calib_tracker.len(),
+        logs.calib_video.len(),
+        cfg.lag_ms
+    );
+    Ok(())
+}
