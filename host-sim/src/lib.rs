@@ -1,5 +1,4 @@
 #![doc = include_str!("../../README.md")]
-#![warn(missing_docs)]
 
 pub mod baselines;
 pub mod demo;
@@ -13,7 +12,3 @@ pub mod register;
 pub mod sample;
 pub mod stats;
 pub mod sweep;
-
-/// The emulator under its former path ([`hil::emulator`]); `firmware/README.md` still
-/// names it so.
-pub use hil::emulator as qemu;
