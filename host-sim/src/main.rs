@@ -93,17 +93,40 @@ enum Command {
         #[command(subcommand)]
         kind: CalibrateCommand,
     },
-    /// Compound a tracked sweep (poses + annotated frames) into a US cloud (PLY).
+    /// Compound a tracked sweep (poses + annotated frames, or a PLUS sequence of bone
+    /// masks) into a US cloud (PLY).
     Compound {
         /// Flange poses: CSV `t,x,y,z,qw,qx,qy,qz` (s, mm, unit quaternion), ~100 Hz.
-        #[arg(long)]
-        poses: PathBuf,
+        #[arg(
+            long,
+            required_unless_present = "sequence",
+            conflicts_with = "sequence"
+        )]
+        poses: Option<PathBuf>,
         /// Bone pixels: CSV `frame,t,u,v` (frame number, video time s, column, row).
+        #[arg(
+            long,
+            required_unless_present = "sequence",
+            conflicts_with = "sequence"
+        )]
+        frames: Option<PathBuf>,
+        /// Spatial calibration (JSON: probe, tcp_T_us, ee_T_tcp; see the README). With
+        /// --sequence, the sequence's transform is then the flange pose b_T_ee.
+        #[arg(long, required_unless_present = "plus_config")]
+        probe: Option<PathBuf>,
+        /// Instead of the CSV logs: a PLUS sequence file (.seq.mha) whose images are bone
+        /// masks (MET_UCHAR, non-zero = bone). Per column, the first mask pixel from the
+        /// probe side (near field) is the bone pixel, as `phantom sweep` annotates; frames
+        /// whose transform or image status is not OK are skipped and counted.
         #[arg(long)]
-        frames: PathBuf,
-        /// Spatial calibration (JSON: probe, tcp_T_us, ee_T_tcp; see the README).
-        #[arg(long)]
-        probe: PathBuf,
+        sequence: Option<PathBuf>,
+        /// The sequence's per-frame transform (`Seq_FrameNNNN_<NAME>Transform`).
+        #[arg(long, default_value = ribreg_sim::sweep::plus::DEFAULT_TRANSFORM)]
+        transform: String,
+        /// With --sequence: the PLUS device-set configuration holding `Image` → `Probe`
+        /// (the `From` of --transform), the calibration with the pixel scale in it.
+        #[arg(long, conflicts_with = "probe", requires = "sequence")]
+        plus_config: Option<PathBuf>,
         /// Video lag behind the tracker, ms.
         #[arg(
             long,
@@ -160,7 +183,9 @@ enum Command {
 #[derive(Subcommand)]
 enum PhantomCommand {
     /// Simulate a multi-line robotic sweep over the phantom: probe calibration, pose and
-    /// frame logs, a temporal-calibration sweep, plus the phantom files.
+    /// frame logs, a temporal-calibration sweep, plus the phantom files; the scan and the
+    /// calibration sweep also as PLUS sequences of bone masks (sweep.seq.mha,
+    /// calib.seq.mha) with plus_config.xml.
     Sweep {
         /// Output folder (created if missing).
         #[arg(long, default_value = "out/sweep")]
@@ -177,11 +202,27 @@ enum CalibrateCommand {
     /// Lag between the US video and the robot tracking from a calibration sweep.
     Temporal {
         /// CSV `t,x,y,z`: TCP positions (s, mm, base frame), ~100 Hz.
-        #[arg(long)]
-        tracker: PathBuf,
+        #[arg(
+            long,
+            required_unless_present = "sequence",
+            conflicts_with = "sequence"
+        )]
+        tracker: Option<PathBuf>,
         /// CSV `t,row`: the landmark's row (s, pixels) per frame, ~30 fps.
+        #[arg(
+            long,
+            required_unless_present = "sequence",
+            conflicts_with = "sequence"
+        )]
+        video: Option<PathBuf>,
+        /// Instead: a PLUS sequence of the calibration sweep recorded without a time
+        /// offset, its images bone masks of the landmark; the tracker stream is the
+        /// per-frame transform's translation, the video stream each mask's landmark row.
         #[arg(long)]
-        video: PathBuf,
+        sequence: Option<PathBuf>,
+        /// The sequence's per-frame transform.
+        #[arg(long, default_value = ribreg_sim::sweep::plus::DEFAULT_TRANSFORM)]
+        transform: String,
         /// Print `{"lag_ms": .., "rmse": .., "pairs": ..}` instead of text.
         #[arg(long)]
         json: bool,
@@ -554,9 +595,19 @@ fn main() -> ExitCode {
                 CalibrateCommand::Temporal {
                     tracker,
                     video,
+                    sequence,
+                    transform,
                     json,
                 },
-        } => sweep::calibrate_temporal(&tracker, &video).map(|est| {
+        } => match (sequence, tracker, video) {
+            (Some(seq), ..) => sweep::plus::calibrate_temporal_sequence(&seq, &transform).map(|(est, n)| {
+                progress(&format!("{}: {}", seq.display(), n.summary()));
+                est
+            }),
+            (None, Some(tracker), Some(video)) => sweep::calibrate_temporal(&tracker, &video),
+            _ => Err(CliError::Usage("give --tracker and --video, or --sequence".into())),
+        }
+        .map(|est| {
             let lag_ms = est.lag_s * 1e3;
             if json {
                 println!(
@@ -575,6 +626,9 @@ fn main() -> ExitCode {
             poses,
             frames,
             probe,
+            sequence,
+            transform,
+            plus_config,
             lag_ms,
             lag_file,
             voxel_mm,
@@ -585,11 +639,27 @@ fn main() -> ExitCode {
                 (None, Some(path)) => read_lag_ms(&path)?,
                 (None, None) => return Err(CliError::Usage("give --lag-ms or --lag-file".into())),
             };
-            let cal = sweep::ProbeFile::read(&probe)?;
-            let poses = sweep::read_poses(&poses)?;
-            let frames = sweep::read_frames(&frames)?;
-            progress(&format!("{} poses, {} pixel rows; lag {lag_ms} ms", poses.len(), frames.len()));
-            let o = sweep::compound(&cal, lag_ms * 1e-3, voxel_mm, &poses, &frames)?;
+            let o = match (&sequence, poses, frames, &probe) {
+                (Some(seq), ..) => {
+                    use sweep::plus::Spatial;
+                    let spatial = match (&plus_config, &probe) {
+                        (Some(c), _) => Spatial::PlusConfig(c),
+                        (None, Some(p)) => Spatial::Probe(p),
+                        (None, None) => return Err(CliError::Usage("give --plus-config or --probe".into())),
+                    };
+                    let (o, s) = sweep::plus::compound_sequence(seq, &transform, spatial, lag_ms * 1e-3, voxel_mm)?;
+                    println!("{}: {}; lag {lag_ms} ms; refused by reason: {:?}", seq.display(), s.counts.summary(), o.refusals);
+                    o
+                }
+                (None, Some(poses), Some(frames), Some(probe)) => {
+                    let cal = sweep::ProbeFile::read(probe)?;
+                    let poses = sweep::read_poses(&poses)?;
+                    let frames = sweep::read_frames(&frames)?;
+                    progress(&format!("{} poses, {} pixel rows; lag {lag_ms} ms", poses.len(), frames.len()));
+                    sweep::compound(&cal, lag_ms * 1e-3, voxel_mm, &poses, &frames)?
+                }
+                _ => return Err(CliError::Usage("give --poses, --frames and --probe, or --sequence".into())),
+            };
             if o.points.is_empty() {
                 return Err(CliError::Usage(format!(
                     "no bone point was placed: {} frames outside the tracked time range, {} invalid \
