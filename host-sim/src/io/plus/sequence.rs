@@ -527,12 +527,15 @@ pub struct SequenceFrame<'a> {
     pub mask: &'a [u8],
 }
 
+/// A transform field as parsed: the matrix, or the value found and what was expected.
+type ParsedMatrix = Result<Matrix4, (String, &'static str)>;
+
 /// Parsed fields of one frame.
 #[derive(Default)]
 struct FrameFields {
     index: u64,
     /// Line and parse result (a malformed transform matters only if the status is OK).
-    transform: Option<(usize, Result<Matrix4, (String, &'static str)>)>,
+    transform: Option<(usize, ParsedMatrix)>,
     status: Option<Status>,
     timestamp: Option<f64>,
     unfiltered: Option<f64>,
@@ -575,7 +578,7 @@ fn split_frame_key(key: &str) -> Option<Option<(u64, &str)>> {
     Some(digits.parse().ok().map(|i| (i, field)))
 }
 
-fn parse_matrix(value: &str) -> Result<Matrix4, (String, &'static str)> {
+fn parse_matrix(value: &str) -> ParsedMatrix {
     const EXPECTED: &str = "16 finite numbers, last row 0 0 0 1";
     let bad = || Err((excerpt(value), EXPECTED));
     let mut m = [[0.0; 4]; 4];
@@ -1028,9 +1031,8 @@ impl SequenceReader {
             }
             None => return Err(K::MissingKey { key: "ElementType" }),
         }
-        if let Some((line, c)) = &g.channels {
+        if let Some((_, c)) = &g.channels {
             if c != "1" {
-                let _ = line;
                 return Err(K::Unsupported {
                     key: "ElementNumberOfChannels",
                     found: excerpt(c),
