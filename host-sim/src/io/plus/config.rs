@@ -26,8 +26,10 @@ pub struct PlusConfigError {
 /// What is wrong with a PLUS configuration file.
 #[derive(Debug)]
 pub enum PlusConfigProblem {
-    /// The operating system failed.
+    /// The operating system failed to read the file.
     Io(std::io::Error),
+    /// Writing the file failed (the writer's message).
+    Write(String),
     /// Larger than [`MAX_CONFIG_BYTES`].
     TooLarge(u64),
     /// Not well-formed XML (the parser's message, with its position).
@@ -56,6 +58,7 @@ impl fmt::Display for PlusConfigError {
         write!(f, "{}: ", self.path.display())?;
         match &self.problem {
             PlusConfigProblem::Io(e) => write!(f, "cannot read: {e}"),
+            PlusConfigProblem::Write(e) => write!(f, "cannot write: {e}"),
             PlusConfigProblem::TooLarge(n) => write!(
                 f,
                 "{n} bytes: larger than the {} MiB a PLUS configuration can be",

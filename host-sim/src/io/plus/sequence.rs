@@ -1350,7 +1350,7 @@ enum Sink {
 
 /// Writes a sequence file: frames are pushed one at a time, their pixels streamed to a
 /// temporary file beside the output (raw or through zlib), their fields kept as text
-/// (~400 bytes a frame); [`SequenceWriter::finish`] writes the header and the data to
+/// (~500 bytes a frame); [`SequenceWriter::finish`] writes the header and the data to
 /// the output atomically, as the other writers of [`crate::io`] do.
 pub struct SequenceWriter {
     path: PathBuf,
@@ -1534,10 +1534,11 @@ impl SequenceWriter {
             Ok(())
         });
         let _ = fs::remove_file(&self.temp);
-        written.map_err(|e| {
-            self.error(SequenceErrorKind::Unwritable(format!(
-                "cannot write the sequence: {e}"
-            )))
+        written.map_err(|e| match e {
+            super::super::IoError::Io { op, source, .. } => {
+                self.error(SequenceErrorKind::Io { op, source })
+            }
+            other => self.error(SequenceErrorKind::Unwritable(other.to_string())),
         })
     }
 }
