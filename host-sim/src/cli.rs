@@ -78,7 +78,7 @@ impl Cli {
             Command::Sample(args) => sample::run(&args),
             Command::Phantom(args) => phantom::run(&args, &ctx),
             Command::Hil(args) => hil::run(&args, &ctx),
-            Command::Calibrate(args) => calibrate::run(&args),
+            Command::Calibrate(args) => calibrate::run(&args, &ctx),
             Command::Compound(args) => compound::run(&args, &ctx),
             Command::Demo(args) => demo::run(&args, &ctx),
             Command::Eval(args) => eval::run(&args, &ctx),

@@ -21,6 +21,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 mod csv;
 mod mesh;
+pub mod plus;
 mod ply;
 
 pub use csv::{

@@ -38,6 +38,7 @@ use crate::error::CliError;
 use crate::io::{self, Cloud, IoError, PlyFormat};
 use crate::phantom::{PhantomConfig, PhantomPair, Pose, SubjectGeometry, MESH_EDGE_MM};
 
+pub mod plus;
 pub(crate) mod sim;
 
 /// Voxel capacity of host compounding: 8192 × 24 B = 192 KiB, enough for a whole-chest
@@ -475,6 +476,14 @@ pub type CalibrationLogs = (Vec<[f64; 4]>, Vec<[f64; 2]>);
 /// A simulated temporal-calibration sweep alone (`calib_tracker.csv` and
 /// `calib_video.csv` rows) for `seed`.
 pub fn simulate_calibration(cfg: &SweepConfig, seed: u64) -> Result<CalibrationLogs, CliError> {
+    Ok(simulate_calibration_captured(cfg, seed)?.0)
+}
+
+/// [`simulate_calibration`] and every captured frame, lost or logged (`calib.seq.mha`).
+pub fn simulate_calibration_captured(
+    cfg: &SweepConfig,
+    seed: u64,
+) -> Result<(CalibrationLogs, Vec<plus::CapturedFrame>), CliError> {
     cfg.validate()?;
     let mut rng = Rng::new(seed ^ STREAM_CALIBRATION.wrapping_mul(0x9E37_79B9_7F4A_7C15));
     Ok(sim::calibration_sweep(
@@ -498,6 +507,10 @@ pub struct SweepLogs {
     pub calib_tracker: Vec<[f64; 4]>,
     /// Calibration sweep: landmark rows `t,row`.
     pub calib_video: Vec<[f64; 2]>,
+    /// Every captured frame of the scan, lost or logged (`sweep.seq.mha`).
+    pub scan_captured: Vec<plus::CapturedFrame>,
+    /// Every captured frame of the calibration sweep (`calib.seq.mha`).
+    pub calib_captured: Vec<plus::CapturedFrame>,
     /// Summary for `sweep.json`.
     pub summary: serde_json::Value,
 }
@@ -530,7 +543,8 @@ pub fn simulate(phantom: &PhantomConfig, cfg: &SweepConfig) -> Result<SweepLogs,
         &base_t_patient,
         &mut rng,
     );
-    let (calib_tracker, calib_video) = simulate_calibration(cfg, phantom.seed)?;
+    let ((calib_tracker, calib_video), calib_captured) =
+        simulate_calibration_captured(cfg, phantom.seed)?;
     let summary = serde_json::json!({
         "sweep": cfg,
         "phantom": ideal,
@@ -552,6 +566,8 @@ pub fn simulate(phantom: &PhantomConfig, cfg: &SweepConfig) -> Result<SweepLogs,
         frames: scan.frames,
         calib_tracker,
         calib_video,
+        scan_captured: scan.captured_frames,
+        calib_captured,
         summary,
     })
 }
@@ -559,7 +575,9 @@ pub fn simulate(phantom: &PhantomConfig, cfg: &SweepConfig) -> Result<SweepLogs,
 impl SweepLogs {
     /// Writes the phantom files (`template.ply`, `waypoints.csv`, `true_waypoints.csv`,
     /// `target.ply` = ideal US cloud, `params.json`) and the sweep files (`probe.json`,
-    /// `poses.csv`, `frames.csv`, `calib_tracker.csv`, `calib_video.csv`, `sweep.json`).
+    /// `poses.csv`, `frames.csv`, `calib_tracker.csv`, `calib_video.csv`, `sweep.json`),
+    /// and the same sweeps as PLUS files (`sweep.seq.mha`, `calib.seq.mha`,
+    /// `plus_config.xml`: [`plus::write_phantom_sequences`]).
     pub fn write(&self, dir: &Path) -> Result<(), CliError> {
         crate::demo::write_phantom(&self.pair, dir)?;
         let probe = serde_json::to_string_pretty(&ProbeFile::from_calibration(&self.calibration))
@@ -586,6 +604,7 @@ impl SweepLogs {
         let summary = serde_json::to_string_pretty(&self.summary)
             .map_err(|e| CliError::Output(format!("sweep.json: {e}")))?;
         io::write_text(&dir.join("sweep.json"), &summary)?;
+        plus::write_phantom_sequences(self, dir)?;
         Ok(())
     }
 }

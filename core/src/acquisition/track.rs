@@ -216,6 +216,12 @@ impl<const N: usize> PoseTrack<N> {
         if lo == hi || t == a.t {
             return Ok(a.to_rigid());
         }
+        // Exactly on the newer pose (the search never lands `lo` on the newest): that
+        // pose, whatever the gap before it. A sequence with one pose per frame places
+        // each frame at its own pose's time.
+        if t == b.t {
+            return Ok(b.to_rigid());
+        }
         let gap_ms = ((b.t - a.t) * 1e3) as f32;
         if gap_ms > MAX_TRACK_GAP_MS {
             return Err(Error::TrackGap {
@@ -280,6 +286,9 @@ mod tests {
         assert_eq!((track.len(), track.received, track.refused), (1, 1, 3));
         track.push(pose(1.2, 10.0, 0.0)).unwrap();
         assert!(matches!(track.at(1.1), Err(Error::TrackGap { .. })));
+        // Exactly on either pose around a gap is that pose, not an interpolation.
+        assert_eq!(track.at(1.2).unwrap().translation.x, 10.0);
+        assert_eq!(track.at(1.0).unwrap().translation.x, 0.0);
         assert!(TrackedPose::new(0.0, Vec3::zeros(), [0.5, 0.0, 0.0, 0.0]).is_err());
         assert!(TrackedPose::new(0.0, Vec3::zeros(), [1.001, 0.0, 0.0, 0.0]).is_ok());
     }

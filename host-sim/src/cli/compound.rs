@@ -1,5 +1,5 @@
-//! `ribreg compound`: a tracked sweep (poses + annotated frames) compounded into a US
-//! cloud.
+//! `ribreg compound`: a tracked sweep (poses + annotated frames, or a PLUS sequence of
+//! bone masks) compounded into a US cloud.
 
 use super::Context;
 use ribreg_sim::error::CliError;
@@ -10,14 +10,36 @@ use std::path::{Path, PathBuf};
 #[derive(clap::Args)]
 pub struct Args {
     /// Flange poses: CSV `t,x,y,z,qw,qx,qy,qz` (s, mm, unit quaternion), ~100 Hz.
-    #[arg(long)]
-    poses: PathBuf,
+    #[arg(
+        long,
+        required_unless_present = "sequence",
+        conflicts_with = "sequence"
+    )]
+    poses: Option<PathBuf>,
     /// Bone pixels: CSV `frame,t,u,v` (frame number, video time s, column, row).
+    #[arg(
+        long,
+        required_unless_present = "sequence",
+        conflicts_with = "sequence"
+    )]
+    frames: Option<PathBuf>,
+    /// Spatial calibration (JSON: probe, tcp_T_us, ee_T_tcp; see the README). With
+    /// --sequence, the sequence's transform is then the flange pose b_T_ee.
+    #[arg(long, required_unless_present = "plus_config")]
+    probe: Option<PathBuf>,
+    /// Instead of the CSV logs: a PLUS sequence file (.seq.mha) whose images are bone
+    /// masks (MET_UCHAR, non-zero = bone). Per column, the first mask pixel from the
+    /// probe side (near field) is the bone pixel, as `phantom sweep` annotates; frames
+    /// whose transform or image status is not OK are skipped and counted.
     #[arg(long)]
-    frames: PathBuf,
-    /// Spatial calibration (JSON: probe, tcp_T_us, ee_T_tcp; see the README).
-    #[arg(long)]
-    probe: PathBuf,
+    sequence: Option<PathBuf>,
+    /// The sequence's per-frame transform (`Seq_FrameNNNN_<NAME>Transform`).
+    #[arg(long, default_value = sweep::plus::DEFAULT_TRANSFORM)]
+    transform: String,
+    /// With --sequence: the PLUS device-set configuration holding `Image` → `Probe`
+    /// (the `From` of --transform), the calibration with the pixel scale in it.
+    #[arg(long, conflicts_with = "probe", requires = "sequence")]
+    plus_config: Option<PathBuf>,
     /// Video lag behind the tracker, ms.
     #[arg(
         long,
@@ -43,15 +65,47 @@ pub fn run(args: &Args, ctx: &Context) -> Result<(), CliError> {
         (None, Some(path)) => read_lag_ms(path)?,
         (None, None) => return Err(CliError::Usage("give --lag-ms or --lag-file".into())),
     };
-    let cal = sweep::ProbeFile::read(&args.probe)?;
-    let poses = sweep::read_poses(&args.poses)?;
-    let frames = sweep::read_frames(&args.frames)?;
-    ctx.progress(&format!(
-        "{} poses, {} pixel rows; lag {lag_ms} ms",
-        poses.len(),
-        frames.len()
-    ));
-    let o = sweep::compound(&cal, lag_ms * 1e-3, args.voxel_mm, &poses, &frames)?;
+    let o = match (&args.sequence, &args.poses, &args.frames, &args.probe) {
+        (Some(seq), ..) => {
+            let spatial = match (&args.plus_config, &args.probe) {
+                (Some(c), _) => sweep::plus::Spatial::PlusConfig(c),
+                (None, Some(p)) => sweep::plus::Spatial::Probe(p),
+                (None, None) => {
+                    return Err(CliError::Usage("give --plus-config or --probe".into()))
+                }
+            };
+            let (o, s) = sweep::plus::compound_sequence(
+                seq,
+                &args.transform,
+                spatial,
+                lag_ms * 1e-3,
+                args.voxel_mm,
+            )?;
+            ctx.progress(&format!(
+                "{}: {}; lag {lag_ms} ms; refused by reason: {:?}",
+                seq.display(),
+                s.counts.summary(),
+                o.refusals
+            ));
+            o
+        }
+        (None, Some(poses), Some(frames), Some(probe)) => {
+            let cal = sweep::ProbeFile::read(probe)?;
+            let poses = sweep::read_poses(poses)?;
+            let frames = sweep::read_frames(frames)?;
+            ctx.progress(&format!(
+                "{} poses, {} pixel rows; lag {lag_ms} ms",
+                poses.len(),
+                frames.len()
+            ));
+            sweep::compound(&cal, lag_ms * 1e-3, args.voxel_mm, &poses, &frames)?
+        }
+        _ => {
+            return Err(CliError::Usage(
+                "give --poses, --frames and --probe, or --sequence".into(),
+            ))
+        }
+    };
     if o.points.is_empty() {
         return Err(CliError::value(format!(
             "no bone point was placed: {} frames outside the tracked time range, {} invalid \

@@ -20,6 +20,7 @@ use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaterni
 use ribreg_core::acquisition::probe::Calibration;
 use ribreg_core::math::rng::Rng;
 
+use super::plus::CapturedFrame;
 use super::{FrameRow, PoseRow, SweepConfig};
 use crate::phantom::{gaussian, Mesh, SubjectParams};
 
@@ -341,6 +342,8 @@ pub(crate) struct Scan {
     pub duration_s: f64,
     /// Scan lines.
     pub lines: usize,
+    /// Every captured frame, lost or logged, with its video stamp (`sweep.seq.mha`).
+    pub captured_frames: Vec<CapturedFrame>,
 }
 
 /// Simulates the multi-line scan of `patient` (mesh in the patient frame) with the robot
@@ -392,10 +395,16 @@ pub(crate) fn scan(
     let mut renderer = Renderer::new(mesh);
     let n_frames = (duration * cfg.frame_rate_hz).floor() as usize + 1;
     let mut frames = Vec::new();
+    let mut captured_frames = Vec::with_capacity(n_frames);
     for i in 0..n_frames {
         let tau = i as f64 / cfg.frame_rate_hz;
         let stamp = tau + cfg.lag_ms * 1e-3 + gaussian(rng) * cfg.timestamp_jitter_ms * 1e-3;
         let missed = rng.next_f64() < cfg.frame_miss_rate;
+        captured_frames.push(CapturedFrame {
+            frame: i as u32,
+            t: stamp,
+            lost: missed,
+        });
         if missed {
             continue;
         }
@@ -420,17 +429,19 @@ pub(crate) fn scan(
         captured: n_frames,
         duration_s: duration,
         lines: path.corners.len() / 2,
+        captured_frames,
     }
 }
 
 /// A temporal-calibration sweep: the probe moved up and down along its beam above a
 /// point landmark (three incommensurate sines, never periodic within ±0.5 s), tracked
-/// TCP positions at the pose rate and the landmark row per frame.
+/// TCP positions at the pose rate and the landmark row per frame; and every captured
+/// frame, lost or logged (`calib.seq.mha`), the logged ones in the order of the rows.
 pub(crate) fn calibration_sweep(
     cfg: &SweepConfig,
     cal: &Calibration,
     rng: &mut Rng,
-) -> super::CalibrationLogs {
+) -> (super::CalibrationLogs, Vec<CapturedFrame>) {
     let landmark = Point3::new(350.0, -120.0, -40.0);
     let beam = V3::new(0.12, -0.05, -1.0).normalize();
     let mid = 0.5 * f64::from(cal.probe.depth_mm);
@@ -455,20 +466,27 @@ pub(crate) fn calibration_sweep(
     let (_, sy) = cal.probe.scale();
     let frames = (duration * cfg.frame_rate_hz).floor() as usize + 1;
     let mut video = Vec::with_capacity(frames);
+    let mut captured = Vec::with_capacity(frames);
     for i in 0..frames {
         let tau = i as f64 / cfg.frame_rate_hz;
         let stamp = tau + cfg.lag_ms * 1e-3 + gaussian(rng) * cfg.timestamp_jitter_ms * 1e-3;
-        if rng.next_f64() < cfg.frame_miss_rate {
-            continue;
+        let mut lost = true;
+        if rng.next_f64() >= cfg.frame_miss_rate {
+            let row = depth_at(tau) / f64::from(sy) + gaussian(rng) * cfg.calibration_noise_px;
+            // Jitter may swap two stamps of neighbouring frames only if it exceeds half a
+            // frame period; keep the stream strictly increasing as a frame grabber would.
+            if video.last().is_none_or(|l: &[f64; 2]| stamp > l[0]) {
+                video.push([stamp, row]);
+                lost = false;
+            }
         }
-        let row = depth_at(tau) / f64::from(sy) + gaussian(rng) * cfg.calibration_noise_px;
-        // Jitter may swap two stamps of neighbouring frames only if it exceeds half a frame
-        // period; keep the stream strictly increasing as a frame grabber would.
-        if video.last().is_none_or(|l: &[f64; 2]| stamp > l[0]) {
-            video.push([stamp, row]);
-        }
+        captured.push(CapturedFrame {
+            frame: i as u32,
+            t: stamp,
+            lost,
+        });
     }
-    (tracker, video)
+    ((tracker, video), captured)
 }
 
 #[cfg(test)]
