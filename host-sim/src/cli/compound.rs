@@ -81,12 +81,13 @@ pub fn run(args: &Args, ctx: &Context) -> Result<(), CliError> {
                 lag_ms * 1e-3,
                 args.voxel_mm,
             )?;
-            ctx.progress(&format!(
+            // On stdout with the result: what was used and skipped is part of it.
+            println!(
                 "{}: {}; lag {lag_ms} ms; refused by reason: {:?}",
                 seq.display(),
                 s.counts.summary(),
                 o.refusals
-            ));
+            );
             o
         }
         (None, Some(poses), Some(frames), Some(probe)) => {

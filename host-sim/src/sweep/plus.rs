@@ -17,7 +17,7 @@
 //! * `ImageToProbe` = `[A | t]`, `A = R · diag(s_x, s_y, s_z)`, is `tcp_T_us` with the
 //!   pixel scale inside it: `s_x = |a₀|`, `s_y = |a₁|` (mm per pixel along a row and down
 //!   a column; the columns `aᵢ` of `A`), `R` = the normalised columns (a proper rotation,
-//!   within [`ribreg_core::acquisition::probe::ROTATION_TOLERANCE`]; a zero third column is completed
+//!   within [`ribreg_core::math::geom::ROTATION_TOLERANCE`]; a zero third column is completed
 //!   by `a₀ × a₁`).
 //!
 //! The pixel origins differ by half a pixel. PLUS's `Image` frame has its origin at the
@@ -150,6 +150,31 @@ pub struct SequenceCounts {
 }
 
 impl SequenceCounts {
+    /// Counts one frame; its transform when both statuses are OK, else `None` (the
+    /// frame is skipped and counted by reason).
+    fn admit(
+        &mut self,
+        status: Status,
+        image: Status,
+        transform: Option<Matrix4>,
+    ) -> Option<Matrix4> {
+        self.frames += 1;
+        match (status, image, transform) {
+            (Status::Ok, Status::Ok, Some(m)) => {
+                self.used += 1;
+                Some(m)
+            }
+            (Status::Ok, _, _) => {
+                self.skipped_image += 1;
+                None
+            }
+            (s, _, _) => {
+                *self.skipped_status.entry(s.name()).or_insert(0) += 1;
+                None
+            }
+        }
+    }
+
     /// Frames skipped for a status.
     pub fn skipped(&self) -> u32 {
         self.skipped_status.values().sum::<u32>() + self.skipped_image
@@ -389,19 +414,9 @@ pub fn read_sweep_sequence(
     let mut frames = Vec::new();
     let mut pixels = Vec::new();
     while let Some(f) = reader.next_frame()? {
-        counts.frames += 1;
-        let m = match (f.status, f.image_status, f.transform) {
-            (Status::Ok, Status::Ok, Some(m)) => m,
-            (Status::Ok, _, _) => {
-                counts.skipped_image += 1;
-                continue;
-            }
-            (s, _, _) => {
-                *counts.skipped_status.entry(s.name()).or_insert(0) += 1;
-                continue;
-            }
+        let Some(m) = counts.admit(f.status, f.image_status, f.transform) else {
+            continue;
         };
-        counts.used += 1;
         let pose = pose_row(f.timestamp, &m).map_err(|e| {
             CliError::value(format!(
                 "{}: frame {}: {transform}Transform is {e}",
@@ -462,19 +477,9 @@ pub fn calibration_sequence_samples(
     let (mut tracker, mut video, mut counts) = (Vec::new(), Vec::new(), SequenceCounts::default());
     let mut pixels = Vec::new();
     while let Some(f) = reader.next_frame()? {
-        counts.frames += 1;
-        let m = match (f.status, f.image_status, f.transform) {
-            (Status::Ok, Status::Ok, Some(m)) => m,
-            (Status::Ok, _, _) => {
-                counts.skipped_image += 1;
-                continue;
-            }
-            (s, _, _) => {
-                *counts.skipped_status.entry(s.name()).or_insert(0) += 1;
-                continue;
-            }
+        let Some(m) = counts.admit(f.status, f.image_status, f.transform) else {
+            continue;
         };
-        counts.used += 1;
         tracker.push(TrackerSample {
             t: f.timestamp,
             position: Vec3::new(m[0][3] as f32, m[1][3] as f32, m[2][3] as f32),
