@@ -1,21 +1,12 @@
 //! End-to-end tests of the `ribreg` binary: the CLI contract of SPEC.md, and bad input
 //! giving one clear line on stderr, a non-zero exit and no output file.
 
+mod common;
+use common::{ribreg, s};
 use ribreg_sim::io::{self, Cloud, PlyFormat};
 use ribreg_sim::phantom::{PhantomConfig, PhantomPair};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn ribreg(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ribreg"))
-        .args(args)
-        .output()
-        .expect("the binary runs")
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("temp paths are UTF-8")
-}
+use std::process::Output;
 
 /// A phantom pair written as template.ply (labelled), target.ply and waypoints.csv.
 fn inputs(dir: &Path) -> (PathBuf, PathBuf, PathBuf, PhantomPair) {

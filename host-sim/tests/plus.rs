@@ -2,8 +2,10 @@
 //! The phantom's sweep as a sequence against its CSV logs, fixtures of an independent
 //! (Python) writer, bad files, temporal calibration from a sequence, and the CLI.
 
+mod common;
+use common::{ribreg, s, stdout};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 use nalgebra::Matrix3;
 use ribreg_core::math::geom::Rigid;
@@ -23,26 +25,6 @@ fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/fixtures/plus")
         .join(name)
-}
-
-fn ribreg(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ribreg"))
-        .args(args)
-        .output()
-        .expect("the binary runs")
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("temp paths are UTF-8")
-}
-
-fn stdout(o: &Output) -> String {
-    assert!(
-        o.status.success(),
-        "stderr: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
 /// Asserts exit 2 with one `ribreg: error:` line containing every needle.

@@ -1,32 +1,14 @@
 //! The robotic-US chain of issue 4: temporal calibration accuracy, the `calibrate`,
 //! `phantom sweep` and `compound` commands end to end into `register`, and bad logs.
 
+mod common;
+use common::{ribreg, s, stdout};
 use ribreg_core::acquisition::temporal::calibrate;
 use ribreg_sim::io;
 use ribreg_sim::phantom::PhantomConfig;
 use ribreg_sim::sweep::{self, SweepConfig};
 use std::path::Path;
-use std::process::{Command, Output};
-
-fn ribreg(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ribreg"))
-        .args(args)
-        .output()
-        .expect("the binary runs")
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("temp paths are UTF-8")
-}
-
-fn stdout(o: &Output) -> String {
-    assert!(
-        o.status.success(),
-        "stderr: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
+use std::process::Output;
 
 /// `ribreg calibrate temporal --tracker <dir/tracker> --video <dir/video>`.
 fn calibrate_cli(d: &Path, tracker: &str, video: &str) -> Output {
