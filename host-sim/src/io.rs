@@ -23,6 +23,7 @@ mod csv;
 mod mesh;
 pub mod plus;
 mod ply;
+pub mod space;
 
 pub use csv::{
     parse_points_csv, parse_table_csv, read_points_csv, read_table_csv, write_points_csv,
@@ -30,6 +31,7 @@ pub use csv::{
 };
 pub use mesh::{read_mesh, write_mesh_obj};
 pub use ply::{parse_ply, read_ply, write_mesh_ply, write_ply};
+pub use space::Space;
 
 /// A point cloud read from or written to disk, coordinates in mm.
 #[derive(Debug, Clone, Default, PartialEq)]
