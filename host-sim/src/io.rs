@@ -24,6 +24,7 @@ mod mesh;
 pub mod plus;
 mod ply;
 pub mod space;
+pub mod volume;
 
 pub use csv::{
     parse_points_csv, parse_table_csv, read_points_csv, read_table_csv, write_points_csv,
@@ -203,6 +204,81 @@ pub enum FormatError {
         /// Number of points.
         points: usize,
     },
+    // Volumes (io::volume)
+    /// Not a NIfTI-1 single file; the text says why (too short, no `n+1` magic).
+    NotNifti(String),
+    /// A NIfTI flavour that is not read: NIfTI-2 or a `.hdr`/`.img` pair (the text says which).
+    NiftiVersion(String),
+    /// A NIfTI-1 header field is unusable (`vox_offset`, `pixdim`, `dim`...).
+    NiftiField {
+        /// The field, as the NIfTI-1 standard names it.
+        field: &'static str,
+        /// What is wrong with it.
+        problem: String,
+    },
+    /// Not a NRRD file (no `NRRD000N` magic line).
+    NotNrrd,
+    /// A NRRD header field is missing or malformed.
+    NrrdField {
+        /// The field or key, as written in the header (`sizes`, `Segment2_LabelValue`...).
+        field: String,
+        /// What is wrong with it.
+        problem: String,
+    },
+    /// The voxel type cannot hold labels (the file's name for it, e.g. `NIfTI datatype 32`).
+    VolumeDatatype(String),
+    /// Not a 3-D volume; the text says what the file holds and what to do.
+    VolumeDimension(String),
+    /// The volume holds no voxels (a size is 0).
+    EmptyVolume,
+    /// More voxels than [`volume::MAX_VOXELS`].
+    VolumeTooLarge {
+        /// Voxels the header declares (saturated at `u64::MAX`).
+        voxels: u64,
+        /// The most accepted.
+        max: usize,
+    },
+    /// The voxel data ends early.
+    VolumeTruncated {
+        /// Data bytes the header declares.
+        expected: u64,
+        /// Data bytes present.
+        found: u64,
+    },
+    /// The compressed voxel data is not a valid gzip stream (the decoder's message).
+    Gzip(String),
+    /// A voxel value (after any NIfTI scaling) is not an integer in `0..=65535`.
+    NotIntegralLabel {
+        /// Index of the voxel in file order (`i + ni * (j + nj * k)`).
+        index: usize,
+        /// The value found.
+        value: f64,
+    },
+    /// The file declares no world coordinate system ribreg can convert (the name found, or
+    /// empty when there is none).
+    UnknownSpace(String),
+    /// The voxel-to-world transform is not finite or not invertible; the text says which.
+    VolumeAffine(String),
+    /// `read_labelmap` does not know the file extension (the name found).
+    VolumeExtension(String),
+    /// A TotalSegmentator directory holds none of the class files ribreg reads.
+    NoClassFiles,
+    /// A TotalSegmentator class file does not match the first one read.
+    VolumeMismatch {
+        /// What differs (`dims 12x10x8 vs 12x10x9`, `affine`...).
+        what: String,
+        /// The file compared against.
+        reference: String,
+    },
+    /// Two TotalSegmentator class files claim the same voxel.
+    LabelOverlap {
+        /// Index of the voxel (`i + ni * (j + nj * k)`).
+        index: usize,
+        /// Class already there.
+        first: &'static str,
+        /// Class claiming it again.
+        second: &'static str,
+    },
 }
 
 /// English plural of an element name for messages.
@@ -293,6 +369,26 @@ impl fmt::Display for FormatError {
             E::LabelCountMismatch { labels, points } => {
                 write!(f, "{labels} labels for {points} points")
             }
+            // Volumes (io::volume)
+            E::NotNifti(why) => write!(f, "not a NIfTI-1 file: {why}"),
+            E::NiftiVersion(what) => write!(f, "{what} is not supported; save as a NIfTI-1 .nii or .nii.gz"),
+            E::NiftiField { field, problem } => write!(f, "NIfTI header field {field}: {problem}"),
+            E::NotNrrd => write!(f, "not a NRRD file (the first line is not NRRD0001..NRRD0005)"),
+            E::NrrdField { field, problem } => write!(f, "NRRD field \"{field}\": {problem}"),
+            E::VolumeDatatype(t) => write!(f, "voxel type {t} cannot hold labels (expected integers or floats)"),
+            E::VolumeDimension(s) => write!(f, "{s}"),
+            E::EmptyVolume => write!(f, "the volume holds no voxels"),
+            E::VolumeTooLarge { voxels, max } => write!(f, "volume too large: {voxels} voxels, at most {max} are read"),
+            E::VolumeTruncated { expected, found } => write!(f, "voxel data ends after {found} of {expected} bytes"),
+            E::Gzip(e) => write!(f, "bad gzip data: {e}"),
+            E::NotIntegralLabel { index, value } => write!(f, "voxel {index} holds {value}, not a label (an integer in 0..=65535)"),
+            E::UnknownSpace(s) if s.is_empty() => write!(f, "no world coordinate system declared (expected RAS or LPS); refusing to guess"),
+            E::UnknownSpace(s) => write!(f, "unknown coordinate system \"{s}\" (expected RAS or LPS)"),
+            E::VolumeAffine(s) => write!(f, "bad voxel-to-world transform: {s}"),
+            E::VolumeExtension(name) => write!(f, "unknown labelmap file \"{name}\" (expected .nii, .nii.gz, .nrrd, .seg.nrrd or a TotalSegmentator directory)"),
+            E::NoClassFiles => write!(f, "no TotalSegmentator class files (sternum.nii.gz, costal_cartilages.nii.gz, rib_left_1.nii.gz .. rib_right_12.nii.gz)"),
+            E::VolumeMismatch { what, reference } => write!(f, "does not match {reference}: {what}"),
+            E::LabelOverlap { index, first, second } => write!(f, "voxel {index} is in both {first} and {second}"),
         }
     }
 }
