@@ -94,7 +94,7 @@ const GRID_TOLERANCE_MM: f64 = 1e-4;
 pub struct LabelVolume {
     /// Voxels along i, j, k.
     pub dims: [usize; 3],
-    /// One label per voxel, i fastest: index = i + dims[0] * (j + dims[1] * k).
+    /// One label per voxel, i fastest: `index = i + dims[0] * (j + dims[1] * k)`.
     pub labels: Vec<u16>,
     /// Voxel (i, j, k) centre → patient frame, mm: p = linear · [i, j, k] + offset (row-major 3×3).
     pub linear: [[f64; 3]; 3],
@@ -136,7 +136,8 @@ impl LabelVolume {
 /// `sternum.nii.gz`, `rib_left_1.nii.gz` .. `rib_right_12.nii.gz`, any others ignored),
 /// merged into one volume with the ids of [`TOTALSEGMENTATOR`] (sternum 116,
 /// costal_cartilages 117, rib_left_1..12 = 92..103, rib_right_1..12 = 104..115) and those
-/// classes in [`LabelVolume::segments`]. Extensions are matched without regard to case.
+/// classes in [`LabelVolume::segments`]. Extensions are matched without regard to case;
+/// whether a NIfTI file is gzipped is told by its content (the gzip magic), not its name.
 ///
 /// # Errors
 ///
@@ -152,22 +153,30 @@ pub fn read_labelmap(path: &Path) -> Result<LabelVolume, IoError> {
         .file_name()
         .map(|n| n.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default();
-    let parse: fn(&[u8]) -> Result<LabelVolume, IoError> = if name.ends_with(".nii.gz") {
-        nifti::parse_nifti_gz
-    } else if name.ends_with(".nii") {
-        parse_nifti
-    } else if name.ends_with(".nrrd") {
-        parse_nrrd
-    } else if name.ends_with(".hdr") || name.ends_with(".img") || name.ends_with(".img.gz") {
-        return Err(IoError::from(FormatError::NiftiVersion(
-            "a NIfTI/Analyze .hdr/.img pair".into(),
-        ))
-        .with_path(path));
-    } else if name.ends_with(".nhdr") {
-        return Err(IoError::from(nrrd::detached()).with_path(path));
-    } else {
-        return Err(IoError::from(FormatError::VolumeExtension(name)).with_path(path));
-    };
+    let parse: fn(&[u8]) -> Result<LabelVolume, IoError> =
+        if name.ends_with(".nii") || name.ends_with(".nii.gz") {
+            // By content, not name: a `.nii` that is gzipped (or a `.nii.gz` that is not) is
+            // common after renaming, and the gzip magic cannot start a NIfTI-1 header (whose
+            // first four bytes are 348 in one byte order).
+            |bytes: &[u8]| {
+                if bytes.starts_with(&[0x1f, 0x8b]) {
+                    nifti::parse_nifti_gz(bytes)
+                } else {
+                    parse_nifti(bytes)
+                }
+            }
+        } else if name.ends_with(".nrrd") {
+            parse_nrrd
+        } else if name.ends_with(".hdr") || name.ends_with(".img") || name.ends_with(".img.gz") {
+            return Err(IoError::from(FormatError::NiftiVersion(
+                "a NIfTI/Analyze .hdr/.img pair".into(),
+            ))
+            .with_path(path));
+        } else if name.ends_with(".nhdr") {
+            return Err(IoError::from(nrrd::detached()).with_path(path));
+        } else {
+            return Err(IoError::from(FormatError::VolumeExtension(name)).with_path(path));
+        };
     let bytes = read_bytes(path)?;
     parse(&bytes).map_err(|e| e.with_path(path))
 }

@@ -78,6 +78,11 @@ fn read(mut input: impl Read) -> Result<LabelVolume, FormatError> {
     if le == NIFTI2_HEADER_BYTES || be == NIFTI2_HEADER_BYTES {
         return Err(FormatError::NiftiVersion("NIfTI-2 (sizeof_hdr 540)".into()));
     }
+    if raw.starts_with(&[0x1f, 0x8b]) {
+        return Err(FormatError::NotNifti(
+            "gzip data (a .nii.gz): decompress it first".into(),
+        ));
+    }
     if le != HEADER_BYTES as i32 && be != HEADER_BYTES as i32 {
         return Err(FormatError::NotNifti(format!(
             "sizeof_hdr is {le}, not 348 in either byte order"

@@ -93,6 +93,16 @@ fn nifti_fixtures_match_nibabel() {
         assert!(volume.segments.is_empty(), "{name}");
         check(&volume, &want[name], name);
     }
+    // Gzip is told by content: a gzipped file named .nii is read; parse_nifti refuses it.
+    let dir = tempfile::tempdir().unwrap();
+    let renamed = dir.path().join("renamed.nii");
+    fs::copy(fixture("oblique.nii.gz"), &renamed).unwrap();
+    assert_eq!(
+        read_labelmap(&renamed).unwrap(),
+        read_labelmap(&fixture("oblique.nii")).unwrap()
+    );
+    let e = parse_nifti(&bytes("oblique.nii.gz")).unwrap_err();
+    assert!(e.to_string().contains("decompress it first"), "{e}");
     // parse_nifti on the bytes gives the same as the reader by path.
     let by_path = read_labelmap(&fixture("oblique.nii")).unwrap();
     assert_eq!(parse_nifti(&bytes("oblique.nii")).unwrap(), by_path);
