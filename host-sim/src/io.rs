@@ -23,6 +23,7 @@ mod csv;
 mod mesh;
 pub mod plus;
 mod ply;
+pub mod prepared;
 pub mod space;
 
 pub use csv::{
@@ -30,7 +31,7 @@ pub use csv::{
     write_table_csv,
 };
 pub use mesh::{read_mesh, write_mesh_obj};
-pub use ply::{parse_ply, read_ply, write_mesh_ply, write_ply};
+pub use ply::{parse_ply, parse_ply_elements, read_ply, write_mesh_ply, write_ply, PlyElement};
 pub use space::Space;
 
 /// A point cloud read from or written to disk, coordinates in mm.
@@ -203,6 +204,11 @@ pub enum FormatError {
         /// Number of points.
         points: usize,
     },
+    // Prepared templates (io::prepared)
+    /// A prepared template of a version this build does not read.
+    PreparedVersion(f64),
+    /// A prepared template's elements or properties are not as written by ribreg.
+    PreparedLayout(String),
 }
 
 /// English plural of an element name for messages.
@@ -293,6 +299,13 @@ impl fmt::Display for FormatError {
             E::LabelCountMismatch { labels, points } => {
                 write!(f, "{labels} labels for {points} points")
             }
+            E::PreparedVersion(v) => write!(
+                f,
+                "prepared template version {v}, this ribreg reads version {}; \
+                 prepare the template again with `ribreg template`",
+                prepared::PREPARED_VERSION
+            ),
+            E::PreparedLayout(s) => write!(f, "not a prepared template as ribreg writes it: {s}"),
         }
     }
 }
@@ -415,7 +428,7 @@ pub fn write_text(path: &Path, text: &str) -> Result<(), IoError> {
 }
 
 /// Read a whole file.
-fn read_bytes(path: &Path) -> Result<Vec<u8>, IoError> {
+pub(crate) fn read_bytes(path: &Path) -> Result<Vec<u8>, IoError> {
     fs::read(path).map_err(|source| IoError::Io {
         path: path.to_path_buf(),
         op: "cannot read",
@@ -551,7 +564,7 @@ fn create_temp(path: &Path) -> io::Result<(PathBuf, File)> {
 /// Write `path` atomically: `body` fills a temporary file in the same directory,
 /// which is flushed, synced and renamed onto `path`. On any failure the temporary
 /// file is removed and `path` is left as it was.
-fn write_atomic(
+pub(crate) fn write_atomic(
     path: &Path,
     body: impl FnOnce(&mut dyn Write) -> io::Result<()>,
 ) -> Result<(), IoError> {
