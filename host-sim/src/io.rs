@@ -25,6 +25,7 @@ pub mod plus;
 mod ply;
 pub mod prepared;
 pub mod space;
+pub mod volume;
 
 pub use csv::{
     parse_points_csv, parse_table_csv, read_points_csv, read_table_csv, write_points_csv,

@@ -16,7 +16,12 @@ pub fn to_file(cloud: &Cloud, template: &Template) -> PreparedTemplate {
     let f = &template.graph.frame;
     PreparedTemplate {
         cloud: cloud.clone(),
-        nodes: template.graph.som1.iter().map(|p| [p.x, p.y, p.z]).collect(),
+        nodes: template
+            .graph
+            .som1
+            .iter()
+            .map(|p| [p.x, p.y, p.z])
+            .collect(),
         node_labels: template.node_labels.to_vec(),
         skeleton: std::array::from_fn(|i| {
             let p = template.skeleton.points[i];
