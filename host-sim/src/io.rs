@@ -22,7 +22,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 mod csv;
 mod mesh;
 pub mod plus;
+mod nifti_write;
 mod ply;
+mod stl_write;
 pub mod prepared;
 pub mod space;
 pub mod volume;
@@ -33,7 +35,9 @@ pub use csv::{
 };
 pub use mesh::{read_mesh, write_mesh_obj};
 pub use ply::{parse_ply, parse_ply_elements, read_ply, write_mesh_ply, write_ply, PlyElement};
+pub use nifti_write::{nifti_bytes, write_nifti};
 pub use space::Space;
+pub use stl_write::write_mesh_stl;
 
 /// A point cloud read from or written to disk, coordinates in mm.
 #[derive(Debug, Clone, Default, PartialEq)]

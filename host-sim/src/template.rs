@@ -7,3 +7,7 @@
 
 pub mod labelmap;
 pub mod prepared;
+pub mod autolabel;
+mod job;
+
+pub use job::{run, TemplateJob, TemplateOutcome};

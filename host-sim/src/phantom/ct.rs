@@ -239,3 +239,28 @@ pub fn labelmap(params: &SubjectParams) -> LabelVolume {
 pub fn to_world(p: P3) -> P3 {
     add(p, WORLD_SHIFT_MM)
 }
+
+/// The part meshes of subject `params` as a segmentation exports them: one mesh per
+/// label (the sternum; each rib's cartilages, both sides in one mesh), in the CT's
+/// world ([`to_world`]), with their label (1 sternum, 2..=5).
+pub fn part_meshes(params: &SubjectParams) -> Vec<(i32, crate::io::Mesh)> {
+    let g = SubjectGeometry::new(params);
+    let mut out: Vec<(i32, crate::io::Mesh)> = Vec::new();
+    for (part, mesh) in g.part_meshes(super::MESH_EDGE_MM) {
+        let label = part.label();
+        let k = match out.iter().position(|(l, _)| *l == label) {
+            Some(k) => k,
+            None => {
+                out.push((label, crate::io::Mesh::default()));
+                out.len() - 1
+            }
+        };
+        let m = &mut out[k].1;
+        // Vertex counts of one phantom part fit a u32.
+        let base = m.vertices.len() as u32;
+        m.vertices.extend(mesh.0.iter().map(|v| to_world(*v)));
+        m.triangles
+            .extend(mesh.1.iter().map(|t| t.map(|i| i + base)));
+    }
+    out
+}
