@@ -23,11 +23,13 @@ use std::sync::atomic::{AtomicU64, Ordering};
 mod cloud;
 mod csv;
 mod lzf;
+mod markups;
 mod mesh;
 mod pcd;
 pub mod plus;
 mod ply;
 pub mod space;
+mod waypoints;
 mod xyz;
 
 pub use cloud::{parse_cloud_csv, read_cloud};
@@ -35,10 +37,12 @@ pub use csv::{
     parse_points_csv, parse_table_csv, read_points_csv, read_table_csv, write_points_csv,
     write_table_csv,
 };
+pub use markups::{parse_fcsv, parse_markups_json};
 pub use mesh::{read_mesh, write_mesh_obj};
 pub use pcd::{parse_pcd, read_pcd};
 pub use ply::{parse_ply, read_ply, write_mesh_ply, write_ply};
 pub use space::Space;
+pub use waypoints::{parse_waypoints_csv, read_waypoints, write_waypoints, Waypoints};
 pub use xyz::{parse_xyz, read_xyz};
 
 /// A point cloud read from or written to disk, coordinates in mm.
