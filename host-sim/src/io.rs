@@ -38,7 +38,7 @@ pub use csv::{
     write_table_csv,
 };
 pub use markups::{parse_fcsv, parse_markups_json};
-pub use mesh::{read_mesh, write_mesh_obj};
+pub use mesh::{read_mesh, read_mesh_in, write_mesh_obj};
 pub use pcd::{parse_pcd, read_pcd};
 pub use ply::{parse_ply, read_ply, write_mesh_ply, write_ply};
 pub use space::Space;
