@@ -22,6 +22,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 mod cloud;
 mod csv;
+#[cfg(test)]
+mod fixtures;
 mod lzf;
 mod markups;
 mod mesh;
