@@ -118,6 +118,15 @@ fn declared_space(extension: &str, bytes: &[u8]) -> Result<Option<Space>, Format
     }
 }
 
+/// [`declared_space`] of every kind, for the fixture tests' garbage runs.
+#[cfg(test)]
+pub(super) fn tests_declared_space(bytes: &[u8]) -> Vec<Result<Option<Space>, FormatError>> {
+    ["stl", "ply", "obj"]
+        .iter()
+        .map(|e| declared_space(e, bytes))
+        .collect()
+}
+
 /// The value of the first `SPACE=` token in `text` (not preceded by a letter or digit):
 /// RAS or LPS, any case.
 fn find_space(text: &[u8]) -> Result<Option<Space>, FormatError> {
