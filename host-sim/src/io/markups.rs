@@ -26,7 +26,8 @@ fn ras_or_lps(name: &str) -> Result<Space, FormatError> {
 /// in file order, converted to ribreg's patient frame.
 ///
 /// Per markup: `coordinateSystem` is `LPS` (the default when absent, as in Slicer) or
-/// `RAS`; `coordinateUnits` must be `mm` or absent. Per control point: `position` (three
+/// `RAS`; `coordinateUnits` must be `mm` (or the code triple `["mm", "UCUM", ...]`) or
+/// absent, `um` and anything else being refused. Per control point: `position` (three
 /// numbers) is required; `label` is kept (empty when absent); `positionStatus`
 /// `defined` (or absent) is kept, while `undefined` and `preview` points (placeholders
 /// not placed yet, or a point being placed) are **skipped**, so the result holds only
@@ -61,7 +62,19 @@ pub fn parse_markups_json(text: &str) -> Result<Waypoints, IoError> {
             None => Space::Lps,
             Some(name) => ras_or_lps(name).map_err(at_markup)?,
         };
-        match text_key("coordinateUnits")? {
+        // A UCUM code, or (schema v1.0.3) a DICOM-style [code, scheme, meaning] triple.
+        let units = match markup.get("coordinateUnits") {
+            Some(Value::Array(code)) => match code.first() {
+                Some(Value::String(s)) => Some(s.as_str()),
+                _ => {
+                    return Err(at_markup(FormatError::Markups(
+                        "\"coordinateUnits\" is not a unit code".to_owned(),
+                    )))
+                }
+            },
+            _ => text_key("coordinateUnits")?,
+        };
+        match units {
             None | Some("mm") => {}
             Some(units) => return Err(at_markup(FormatError::UnknownUnits(excerpt(units)))),
         }
@@ -305,6 +318,17 @@ mod tests {
             json_err(r#"{"markups": [{"coordinateUnits": "um", "controlPoints": []}]}"#),
             "markup 0: unsupported coordinate units \"um\" (expected mm)"
         );
+        assert_eq!(
+            json_err(r#"{"markups": [{"coordinateUnits": ["um", "UCUM", "micrometer"]}]}"#),
+            "markup 0: unsupported coordinate units \"um\" (expected mm)"
+        );
+        assert_eq!(
+            json_err(r#"{"markups": [{"coordinateUnits": [1]}]}"#),
+            "markup 0: bad markups file: \"coordinateUnits\" is not a unit code"
+        );
+        let triple = r#"{"markups": [{"coordinateUnits": ["mm", "UCUM", "millimeter"],
+            "controlPoints": [{"position": [1, 2, 3]}]}]}"#;
+        assert_eq!(parse_markups_json(triple).unwrap().points.len(), 1);
         assert_eq!(
             json_err(r#"{"markups": [{"controlPoints": {}}]}"#),
             "markup 0: bad markups file: \"controlPoints\" is not an array"
