@@ -1,4 +1,5 @@
-//! Host file I/O: point clouds (PLY, CSV) and surface meshes (PLY, OBJ, STL).
+//! Host file I/O: point clouds (PLY, PCD, XYZ, CSV), surface meshes (PLY, OBJ, STL) and
+//! waypoints (CSV, 3D Slicer markups).
 //!
 //! Coordinates are millimetres. Every reader returns a typed [`IoError`] for bad
 //! input and never panics, whatever the bytes. Every writer is atomic: it writes a
@@ -19,8 +20,14 @@ use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
+mod cloud;
 mod csv;
+#[cfg(test)]
+mod fixtures;
+mod lzf;
+mod markups;
 mod mesh;
+mod pcd;
 pub mod plus;
 mod nifti_write;
 mod ply;
@@ -28,16 +35,23 @@ mod stl_write;
 pub mod prepared;
 pub mod space;
 pub mod volume;
+mod waypoints;
+mod xyz;
 
+pub use cloud::{parse_cloud_csv, read_cloud};
 pub use csv::{
     parse_points_csv, parse_table_csv, read_points_csv, read_table_csv, write_points_csv,
     write_table_csv,
 };
-pub use mesh::{read_mesh, write_mesh_obj};
-pub use ply::{parse_ply, parse_ply_elements, read_ply, write_mesh_ply, write_ply, PlyElement};
+pub use markups::{parse_fcsv, parse_markups_json};
+pub use mesh::{read_mesh, read_mesh_in, write_mesh_obj};
 pub use nifti_write::{nifti_bytes, write_nifti};
+pub use pcd::{parse_pcd, read_pcd};
+pub use ply::{parse_ply, parse_ply_elements, read_ply, write_mesh_ply, write_ply, PlyElement};
 pub use space::Space;
 pub use stl_write::write_mesh_stl;
+pub use waypoints::{parse_waypoints_csv, read_waypoints, write_waypoints, Waypoints};
+pub use xyz::{parse_xyz, read_xyz};
 
 /// A point cloud read from or written to disk, coordinates in mm.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -214,6 +228,61 @@ pub enum FormatError {
     PreparedVersion(f64),
     /// A prepared template's elements or properties are not as written by ribreg.
     PreparedLayout(String),
+
+    // Clouds and waypoints (io::pcd, io::xyz, io::markups)
+    /// The data does not start with a PCD header (`VERSION`, `FIELDS`... lines).
+    NotPcd,
+    /// A PCD header line is malformed, missing or inconsistent; the text says how.
+    PcdHeader(String),
+    /// A PCD field cannot be read as declared (bad `SIZE`/`TYPE`/`COUNT`, or a required
+    /// field missing or of the wrong type).
+    PcdField {
+        /// The field name (`x`, `label`...).
+        field: String,
+        /// What is wrong with it.
+        problem: String,
+    },
+    /// The PCD `DATA` line names an encoding other than `ascii`, `binary` or
+    /// `binary_compressed` (the text found).
+    PcdData(String),
+    /// The PCD `POINTS` count differs from `WIDTH × HEIGHT`.
+    PcdPoints {
+        /// `POINTS` as declared.
+        points: usize,
+        /// `WIDTH` as declared.
+        width: usize,
+        /// `HEIGHT` as declared.
+        height: usize,
+    },
+    /// A PCD `binary_compressed` body is not valid LZF data of the declared size; the
+    /// text says how.
+    Lzf(String),
+    /// A 3D Slicer markups file is malformed; the text says how.
+    Markups(String),
+    /// A file declares a coordinate system other than RAS or LPS (the value found).
+    UnknownSpace(String),
+    /// A markups file declares coordinate units other than millimetres (the value found).
+    UnknownUnits(String),
+    /// A waypoint file holds no (defined) waypoints, or a waypoint writer was given none.
+    NoWaypoints,
+    /// A CSV header lacks the columns a reader needs.
+    CsvColumns {
+        /// The columns needed, e.g. `x, y and z`.
+        expected: &'static str,
+        /// The header found.
+        found: String,
+    },
+    /// A reader or writer choosing the format by extension does not know this one.
+    UnknownFileExtension {
+        /// What is read or written (`point cloud`, `waypoint`).
+        what: &'static str,
+        /// The extension found (possibly empty).
+        extension: String,
+        /// The extensions accepted, for the message.
+        expected: &'static str,
+    },
+    /// A label cannot be written so that its reader gives it back (it holds a line break).
+    UnwritableLabel(String),
 }
 
 /// English plural of an element name for messages.
@@ -311,6 +380,41 @@ impl fmt::Display for FormatError {
                 prepared::PREPARED_VERSION
             ),
             E::PreparedLayout(s) => write!(f, "not a prepared template as ribreg writes it: {s}"),
+
+            // Clouds and waypoints (io::pcd, io::xyz, io::markups)
+            E::NotPcd => write!(f, "not a PCD file (no VERSION or FIELDS header line)"),
+            E::PcdHeader(s) => write!(f, "bad PCD header: {s}"),
+            E::PcdField { field, problem } => write!(f, "PCD field {field}: {problem}"),
+            E::PcdData(s) => write!(
+                f,
+                "unsupported PCD DATA \"{s}\" (expected ascii, binary or binary_compressed)"
+            ),
+            E::PcdPoints {
+                points,
+                width,
+                height,
+            } => write!(f, "POINTS {points} is not WIDTH {width} x HEIGHT {height}"),
+            E::Lzf(s) => write!(f, "bad binary_compressed body: {s}"),
+            E::Markups(s) => write!(f, "bad markups file: {s}"),
+            E::UnknownSpace(s) => {
+                write!(f, "unknown coordinate system \"{s}\" (expected RAS or LPS)")
+            }
+            E::UnknownUnits(s) => write!(f, "unsupported coordinate units \"{s}\" (expected mm)"),
+            E::NoWaypoints => write!(f, "no waypoints"),
+            E::CsvColumns { expected, found } => {
+                write!(f, "CSV header needs columns {expected}, found \"{found}\"")
+            }
+            E::UnknownFileExtension {
+                what,
+                extension,
+                expected,
+            } => write!(
+                f,
+                "unknown {what} file extension \"{extension}\" (expected {expected})"
+            ),
+            E::UnwritableLabel(s) => {
+                write!(f, "label \"{s}\" holds a line break and cannot be written")
+            }
         }
     }
 }

@@ -55,7 +55,13 @@ fn labelmap_and_parts_register_as_well_as_the_labelled_cloud() {
     let mut worst: f64 = 0.0;
     for seed in ["3", "11"] {
         stdout(&ribreg(&[
-            "-q", "phantom", "--seed", seed, "--ct", "--out-dir", s(d),
+            "-q",
+            "phantom",
+            "--seed",
+            seed,
+            "--ct",
+            "--out-dir",
+            s(d),
         ]));
         let reference = register(d, &d.join("template.ply"), &d.join("waypoints.csv"), "ply");
         let plan = d.join("ct/plan.mrk.json");
@@ -70,9 +76,18 @@ fn labelmap_and_parts_register_as_well_as_the_labelled_cloud() {
         assert!(out.contains("rib 5"), "{out}");
         let labelmap = register(d, &d.join("from_labelmap.ply"), &plan, "labelmap");
         let mut args = vec!["-q".to_owned(), "template".to_owned()];
-        for (label, file) in [("sternum", "sternum"), ("2", "rib2"), ("3", "rib3"), ("4", "rib4"), ("5", "rib5")] {
+        for (label, file) in [
+            ("sternum", "sternum"),
+            ("2", "rib2"),
+            ("3", "rib3"),
+            ("4", "rib4"),
+            ("5", "rib5"),
+        ] {
             args.push("--part".into());
-            args.push(format!("{label}={}", s(&d.join(format!("ct/parts/{file}.stl")))));
+            args.push(format!(
+                "{label}={}",
+                s(&d.join(format!("ct/parts/{file}.stl")))
+            ));
         }
         args.push("--out".into());
         args.push(s(&d.join("from_parts.ply")).into());
@@ -82,7 +97,9 @@ fn labelmap_and_parts_register_as_well_as_the_labelled_cloud() {
         eprintln!(
             "seed {seed}: waypoint error labelled PLY {reference:.2} mm, labelmap {labelmap:.2}, parts {parts:.2}"
         );
-        worst = worst.max((labelmap - reference).abs()).max((parts - reference).abs());
+        worst = worst
+            .max((labelmap - reference).abs())
+            .max((parts - reference).abs());
     }
     assert!(worst <= 0.5, "{worst:.2} mm from the labelled-PLY path");
 }
@@ -91,7 +108,14 @@ fn labelmap_and_parts_register_as_well_as_the_labelled_cloud() {
 fn a_prepared_template_registers_bit_for_bit_like_its_cloud() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    stdout(&ribreg(&["-q", "phantom", "--seed", "5", "--out-dir", s(d)]));
+    stdout(&ribreg(&[
+        "-q",
+        "phantom",
+        "--seed",
+        "5",
+        "--out-dir",
+        s(d),
+    ]));
     stdout(&ribreg(&[
         "-q",
         "template",
@@ -112,8 +136,15 @@ fn a_prepared_template_registers_bit_for_bit_like_its_cloud() {
     }
     // The paper's method cannot take a prepared template.
     let o = ribreg(&[
-        "register", "--method", "paper", "--template", s(&d.join("prepared.ply")),
-        "--target", s(&d.join("target.ply")), "--out", s(&d.join("x.ply")),
+        "register",
+        "--method",
+        "paper",
+        "--template",
+        s(&d.join("prepared.ply")),
+        "--target",
+        s(&d.join("target.ply")),
+        "--out",
+        s(&d.join("x.ply")),
     ]);
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("prepared"));
@@ -154,7 +185,12 @@ fn bad_labelmaps_are_refused_with_one_clear_line() {
         refused(&refs, &out, expect);
     };
     // Rib 5's bone missing on the right: its cartilage touches no rib.
-    labelmap_with(&nii, |v| v.labels.iter_mut().filter(|l| **l == 108).for_each(|l| *l = 0));
+    labelmap_with(&nii, |v| {
+        v.labels
+            .iter_mut()
+            .filter(|l| **l == 108)
+            .for_each(|l| *l = 0)
+    });
     run(template(&[]), "rib 5 not found on the right");
     // An empty mask.
     labelmap_with(&nii, |v| v.labels.iter_mut().for_each(|l| *l = 0));
@@ -165,7 +201,10 @@ fn bad_labelmaps_are_refused_with_one_clear_line() {
     std::fs::write(&map, r#"{"sternum": 1, "costal_cartilages": 2, "rib_left_2": 3, "rib_left_3": 4, "rib_left_4": 5, "rib_left_5": 6, "rib_right_2": 7, "rib_right_3": 8, "rib_right_4": 9, "rib_right_5": 10}"#).unwrap();
     run(template(&["--label-map", s(&map)]), "no sternum voxels");
     std::fs::write(&map, r#"{"sternum": 116, "heart": 51}"#).unwrap();
-    run(template(&["--label-map", s(&map)]), "\"heart\" is not a class");
+    run(
+        template(&["--label-map", s(&map)]),
+        "\"heart\" is not a class",
+    );
     // Not a volume at all.
     std::fs::write(&nii, b"not gzip").unwrap();
     let o = ribreg(&template(&[]).iter().map(String::as_str).collect::<Vec<_>>());
@@ -195,9 +234,15 @@ fn an_off_by_one_rib_numbering_is_reported_and_overridden() {
         err
     };
     let log = make(&right, &d.join("a.ply"), &[]);
-    assert!(log.contains("rib 2 = the file's rib 2 (ids 93/105)"), "{log}");
+    assert!(
+        log.contains("rib 2 = the file's rib 2 (ids 93/105)"),
+        "{log}"
+    );
     let log = make(&shifted, &d.join("b.ply"), &["--rib2", "3"]);
-    assert!(log.contains("rib 2 = the file's rib 3 (ids 94/106)"), "{log}");
+    assert!(
+        log.contains("rib 2 = the file's rib 3 (ids 94/106)"),
+        "{log}"
+    );
     assert_eq!(
         std::fs::read(d.join("a.ply")).unwrap(),
         std::fs::read(d.join("b.ply")).unwrap()

@@ -17,9 +17,10 @@ pub fn run(job: &TemplateJob, ctx: &Context) -> Result<(), CliError> {
         c[3],
         c[4],
         c[5],
-        job.prepared
-            .as_ref()
-            .map_or(String::new(), |p| format!("; prepared template {}", p.display()))
+        job.prepared.as_ref().map_or(String::new(), |p| format!(
+            "; prepared template {}",
+            p.display()
+        ))
     );
     Ok(())
 }
