@@ -16,6 +16,7 @@ mod hil;
 mod phantom;
 mod register;
 mod sample;
+mod template;
 
 #[derive(Parser)]
 #[command(
@@ -35,6 +36,9 @@ pub struct Cli {
 enum Command {
     /// Register a CT template cloud onto a US target cloud and map waypoints.
     Register(RegisterJob),
+    /// Make a labelled template cloud (and its prepared parts) from a CT labelmap, one
+    /// mesh per part, or a point cloud.
+    Template(ribreg_sim::template::TemplateJob),
     /// Poisson-disc sample a surface mesh (PLY, OBJ or STL) into a point cloud (PLY).
     Sample(sample::Args),
     /// Write a phantom pair (CT template, US target, waypoints, ground truth) to a folder,
@@ -75,6 +79,7 @@ impl Cli {
         let ctx = Context { quiet: self.quiet };
         match self.command {
             Command::Register(job) => register::run(&job, &ctx),
+            Command::Template(job) => template::run(&job, &ctx),
             Command::Sample(args) => sample::run(&args),
             Command::Phantom(args) => phantom::run(&args, &ctx),
             Command::Hil(args) => hil::run(&args, &ctx),

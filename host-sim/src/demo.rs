@@ -55,6 +55,43 @@ pub fn write_phantom(pair: &PhantomPair, dir: &Path) -> Result<(), CliError> {
     Ok(())
 }
 
+/// Writes the pair's CT as a segmentation and planning workflow hands it over
+/// ([`crate::phantom::ct`]) into `dir` (created if missing): `labelmap.nii.gz`
+/// (TotalSegmentator ids, distractor cartilages 1, 6 and 7), `parts/sternum.stl` and
+/// `parts/rib2.stl`..`rib5.stl` (Slicer-style binary STL, `SPACE=LPS`), and the plan as
+/// 3D Slicer markups, `plan.mrk.json` (LPS) — all in the CT's world, which is the
+/// phantom's frame moved by [`crate::phantom::ct::WORLD_SHIFT_MM`].
+pub fn write_ct(pair: &PhantomPair, dir: &Path) -> Result<(), CliError> {
+    let parts = dir.join("parts");
+    std::fs::create_dir_all(&parts).map_err(|source| io::IoError::Io {
+        path: parts.clone(),
+        op: "cannot create the directory",
+        source,
+    })?;
+    let volume = crate::phantom::ct::labelmap(&pair.template_params);
+    io::write_nifti(&dir.join("labelmap.nii.gz"), &volume)?;
+    for (label, mesh) in crate::phantom::ct::part_meshes(&pair.template_params) {
+        let name = if label == 1 {
+            "sternum.stl".to_owned()
+        } else {
+            format!("rib{label}.stl")
+        };
+        io::write_mesh_stl(&parts.join(name), &mesh, io::Space::Lps)?;
+    }
+    let plan = io::Waypoints {
+        points: pair
+            .template_waypoints
+            .iter()
+            .map(|p| crate::phantom::ct::to_world(*p))
+            .collect(),
+        labels: (0..pair.template_waypoints.len())
+            .map(|i| format!("W{}", i + 1))
+            .collect(),
+    };
+    io::write_waypoints(&dir.join("plan.mrk.json"), &plan)?;
+    Ok(())
+}
+
 /// Distances between paired points: mean, population SD, max (mm).
 pub fn paired_errors(a: &[Vec3], truth: &[[f64; 3]]) -> (f64, f64, f64) {
     let d: Vec<f64> = a

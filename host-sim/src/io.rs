@@ -1,4 +1,5 @@
-//! Host file I/O: point clouds (PLY, CSV) and surface meshes (PLY, OBJ, STL).
+//! Host file I/O: point clouds (PLY, PCD, XYZ, CSV), surface meshes (PLY, OBJ, STL) and
+//! waypoints (CSV, 3D Slicer markups).
 //!
 //! Coordinates are millimetres. Every reader returns a typed [`IoError`] for bad
 //! input and never panics, whatever the bytes. Every writer is atomic: it writes a
@@ -19,20 +20,38 @@ use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
+mod cloud;
 mod csv;
+#[cfg(test)]
+mod fixtures;
+mod lzf;
+mod markups;
 mod mesh;
+mod pcd;
 pub mod plus;
+mod nifti_write;
 mod ply;
+mod stl_write;
+pub mod prepared;
 pub mod space;
 pub mod volume;
+mod waypoints;
+mod xyz;
 
+pub use cloud::{parse_cloud_csv, read_cloud};
 pub use csv::{
     parse_points_csv, parse_table_csv, read_points_csv, read_table_csv, write_points_csv,
     write_table_csv,
 };
-pub use mesh::{read_mesh, write_mesh_obj};
-pub use ply::{parse_ply, read_ply, write_mesh_ply, write_ply};
+pub use markups::{parse_fcsv, parse_markups_json};
+pub use mesh::{read_mesh, read_mesh_in, write_mesh_obj};
+pub use nifti_write::{nifti_bytes, write_nifti};
+pub use pcd::{parse_pcd, read_pcd};
+pub use ply::{parse_ply, parse_ply_elements, read_ply, write_mesh_ply, write_ply, PlyElement};
 pub use space::Space;
+pub use stl_write::write_mesh_stl;
+pub use waypoints::{parse_waypoints_csv, read_waypoints, write_waypoints, Waypoints};
+pub use xyz::{parse_xyz, read_xyz};
 
 /// A point cloud read from or written to disk, coordinates in mm.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -204,6 +223,67 @@ pub enum FormatError {
         /// Number of points.
         points: usize,
     },
+    // Prepared templates (io::prepared)
+    /// A prepared template of a version this build does not read.
+    PreparedVersion(f64),
+    /// A prepared template's elements or properties are not as written by ribreg.
+    PreparedLayout(String),
+
+    // Clouds and waypoints (io::pcd, io::xyz, io::markups)
+    /// The data does not start with a PCD header (`VERSION`, `FIELDS`... lines).
+    NotPcd,
+    /// A PCD header line is malformed, missing or inconsistent; the text says how.
+    PcdHeader(String),
+    /// A PCD field cannot be read as declared (bad `SIZE`/`TYPE`/`COUNT`, or a required
+    /// field missing or of the wrong type).
+    PcdField {
+        /// The field name (`x`, `label`...).
+        field: String,
+        /// What is wrong with it.
+        problem: String,
+    },
+    /// The PCD `DATA` line names an encoding other than `ascii`, `binary` or
+    /// `binary_compressed` (the text found).
+    PcdData(String),
+    /// The PCD `POINTS` count differs from `WIDTH × HEIGHT`.
+    PcdPoints {
+        /// `POINTS` as declared.
+        points: usize,
+        /// `WIDTH` as declared.
+        width: usize,
+        /// `HEIGHT` as declared.
+        height: usize,
+    },
+    /// A PCD `binary_compressed` body is not valid LZF data of the declared size; the
+    /// text says how.
+    Lzf(String),
+    /// A 3D Slicer markups file is malformed; the text says how.
+    Markups(String),
+    /// A file declares a coordinate system other than RAS or LPS (the value found).
+    UnknownSpace(String),
+    /// A markups file declares coordinate units other than millimetres (the value found).
+    UnknownUnits(String),
+    /// A waypoint file holds no (defined) waypoints, or a waypoint writer was given none.
+    NoWaypoints,
+    /// A CSV header lacks the columns a reader needs.
+    CsvColumns {
+        /// The columns needed, e.g. `x, y and z`.
+        expected: &'static str,
+        /// The header found.
+        found: String,
+    },
+    /// A reader or writer choosing the format by extension does not know this one.
+    UnknownFileExtension {
+        /// What is read or written (`point cloud`, `waypoint`).
+        what: &'static str,
+        /// The extension found (possibly empty).
+        extension: String,
+        /// The extensions accepted, for the message.
+        expected: &'static str,
+    },
+    /// A label cannot be written so that its reader gives it back (it holds a line break).
+    UnwritableLabel(String),
+
     // Volumes (io::volume)
     /// Not a NIfTI-1 single file; the text says why (too short, no `n+1` magic).
     NotNifti(String),
@@ -254,9 +334,9 @@ pub enum FormatError {
         /// The value found.
         value: f64,
     },
-    /// The file declares no world coordinate system ribreg can convert (the name found, or
-    /// empty when there is none).
-    UnknownSpace(String),
+    /// The file declares no world coordinate system (a NRRD without `space`); an unknown
+    /// one is [`FormatError::UnknownSpace`].
+    NoSpace,
     /// The voxel-to-world transform is not finite or not invertible; the text says which.
     VolumeAffine(String),
     /// `read_labelmap` does not know the file extension (the name found).
@@ -369,6 +449,48 @@ impl fmt::Display for FormatError {
             E::LabelCountMismatch { labels, points } => {
                 write!(f, "{labels} labels for {points} points")
             }
+            E::PreparedVersion(v) => write!(
+                f,
+                "prepared template version {v}, this ribreg reads version {}; \
+                 prepare the template again with `ribreg template`",
+                prepared::PREPARED_VERSION
+            ),
+            E::PreparedLayout(s) => write!(f, "not a prepared template as ribreg writes it: {s}"),
+
+            // Clouds and waypoints (io::pcd, io::xyz, io::markups)
+            E::NotPcd => write!(f, "not a PCD file (no VERSION or FIELDS header line)"),
+            E::PcdHeader(s) => write!(f, "bad PCD header: {s}"),
+            E::PcdField { field, problem } => write!(f, "PCD field {field}: {problem}"),
+            E::PcdData(s) => write!(
+                f,
+                "unsupported PCD DATA \"{s}\" (expected ascii, binary or binary_compressed)"
+            ),
+            E::PcdPoints {
+                points,
+                width,
+                height,
+            } => write!(f, "POINTS {points} is not WIDTH {width} x HEIGHT {height}"),
+            E::Lzf(s) => write!(f, "bad binary_compressed body: {s}"),
+            E::Markups(s) => write!(f, "bad markups file: {s}"),
+            E::UnknownSpace(s) => {
+                write!(f, "unknown coordinate system \"{s}\" (expected RAS or LPS)")
+            }
+            E::UnknownUnits(s) => write!(f, "unsupported coordinate units \"{s}\" (expected mm)"),
+            E::NoWaypoints => write!(f, "no waypoints"),
+            E::CsvColumns { expected, found } => {
+                write!(f, "CSV header needs columns {expected}, found \"{found}\"")
+            }
+            E::UnknownFileExtension {
+                what,
+                extension,
+                expected,
+            } => write!(
+                f,
+                "unknown {what} file extension \"{extension}\" (expected {expected})"
+            ),
+            E::UnwritableLabel(s) => {
+                write!(f, "label \"{s}\" holds a line break and cannot be written")
+            }
             // Volumes (io::volume)
             E::NotNifti(why) => write!(f, "not a NIfTI-1 file: {why}"),
             E::NiftiVersion(what) => write!(f, "{what} is not supported; save as a NIfTI-1 .nii or .nii.gz"),
@@ -382,8 +504,10 @@ impl fmt::Display for FormatError {
             E::VolumeTruncated { expected, found } => write!(f, "voxel data ends after {found} of {expected} bytes"),
             E::Gzip(e) => write!(f, "bad gzip data: {e}"),
             E::NotIntegralLabel { index, value } => write!(f, "voxel {index} holds {value}, not a label (an integer in 0..=65535)"),
-            E::UnknownSpace(s) if s.is_empty() => write!(f, "no world coordinate system declared (expected RAS or LPS); refusing to guess"),
-            E::UnknownSpace(s) => write!(f, "unknown coordinate system \"{s}\" (expected RAS or LPS)"),
+            E::NoSpace => write!(
+                f,
+                "no world coordinate system declared (expected RAS or LPS); refusing to guess"
+            ),
             E::VolumeAffine(s) => write!(f, "bad voxel-to-world transform: {s}"),
             E::VolumeExtension(name) => write!(f, "unknown labelmap file \"{name}\" (expected .nii, .nii.gz, .nrrd, .seg.nrrd or a TotalSegmentator directory)"),
             E::NoClassFiles => write!(f, "no TotalSegmentator class files (sternum.nii.gz, costal_cartilages.nii.gz, rib_left_1.nii.gz .. rib_right_12.nii.gz)"),
@@ -511,7 +635,7 @@ pub fn write_text(path: &Path, text: &str) -> Result<(), IoError> {
 }
 
 /// Read a whole file.
-fn read_bytes(path: &Path) -> Result<Vec<u8>, IoError> {
+pub(crate) fn read_bytes(path: &Path) -> Result<Vec<u8>, IoError> {
     fs::read(path).map_err(|source| IoError::Io {
         path: path.to_path_buf(),
         op: "cannot read",
@@ -647,7 +771,7 @@ fn create_temp(path: &Path) -> io::Result<(PathBuf, File)> {
 /// Write `path` atomically: `body` fills a temporary file in the same directory,
 /// which is flushed, synced and renamed onto `path`. On any failure the temporary
 /// file is removed and `path` is left as it was.
-fn write_atomic(
+pub(crate) fn write_atomic(
     path: &Path,
     body: impl FnOnce(&mut dyn Write) -> io::Result<()>,
 ) -> Result<(), IoError> {

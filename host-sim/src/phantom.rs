@@ -90,6 +90,7 @@ use std::f64::consts::TAU;
 use ribreg_core::math::rng::Rng;
 use serde::{Deserialize, Serialize};
 
+pub mod ct;
 mod geometry;
 mod mesh;
 mod params;

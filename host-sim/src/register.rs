@@ -6,6 +6,7 @@
 //! only with the clouds themselves (measured: 200,000 + 200,000 points register in well
 //! under a second, see the README).
 
+use crate::io::prepared::TemplateFile;
 use crate::io::{self, Cloud, PlyFormat};
 use ribreg_core::config::{Config, RIBS, RIB_SAMPLES};
 use ribreg_core::error::Cloud as Which;
@@ -56,7 +57,8 @@ pub const HOST_CACHE: usize = 1024;
 /// Inputs and outputs of one `register` run (the `ribreg register` arguments).
 #[derive(Clone, Debug, Default, clap::Args)]
 pub struct RegisterJob {
-    /// CT template point cloud (PLY; optional integer `label`: rib 2..5, 1 = sternum).
+    /// CT template: a point cloud (PLY; optional integer `label`: rib 2..5, 1 = sternum)
+    /// or a prepared template (`ribreg template --prepared`, improved method).
     #[arg(long)]
     pub template: PathBuf,
     /// US target point cloud (PLY).
@@ -202,7 +204,6 @@ pub fn register_clouds(
     method: Method,
     progress: &mut dyn FnMut(&str),
 ) -> Result<RegisterOutcome, Error> {
-    let cfg = &method.config();
     let t0 = Instant::now();
     let tpl = build_template(template, labels, method, progress)?;
     let t_template = t0.elapsed();
@@ -212,6 +213,34 @@ pub fn register_clouds(
         tpl.graph.key_points.len(),
         ms(t_template)
     ));
+    register_prepared(
+        tpl,
+        template,
+        labels.is_some(),
+        target,
+        waypoints,
+        method,
+        t_template,
+        progress,
+    )
+}
+
+/// [`register_clouds`] with the template already prepared (`tpl`, built from
+/// `template` by [`build_template`] or read from a prepared file): registers, maps the
+/// template's points and the waypoints, and measures. `t_template` is what preparing
+/// took (zero when read), for the report.
+#[allow(clippy::too_many_arguments)]
+pub fn register_prepared(
+    tpl: Template,
+    template: &[Vec3],
+    labelled: bool,
+    target: &[Vec3],
+    waypoints: Option<&[Vec3]>,
+    method: Method,
+    t_template: std::time::Duration,
+    progress: &mut dyn FnMut(&str),
+) -> Result<RegisterOutcome, Error> {
+    let cfg = &method.config();
     let t1 = Instant::now();
     let reg = register(&tpl, target, cfg)?;
     let t_register = t1.elapsed();
@@ -254,7 +283,7 @@ pub fn register_clouds(
     let report = json!({
         "version": 1,
         "method": method.name(),
-        "template": { "points": template.len(), "labelled": labels.is_some() },
+        "template": { "points": template.len(), "labelled": labelled },
         "target": { "points": target.len() },
         "skeleton": skeleton_json(&tpl, &reg),
         "endpoint_match": {
@@ -353,7 +382,22 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
         }
     }
     let t0 = Instant::now();
-    let template: Cloud = io::read_ply(&job.template)?;
+    let (template, prepared): (Cloud, Option<Template>) =
+        match io::prepared::read_template_file(&job.template)? {
+            TemplateFile::Cloud(c) => (c, None),
+            TemplateFile::Prepared(p) => {
+                if job.method != Method::Improved {
+                    return Err(CliError::Usage(format!(
+                        "{}: a prepared template is the improved method's; \
+                         give --method paper the template cloud instead",
+                        job.template.display()
+                    )));
+                }
+                let tpl = crate::template::prepared::from_file(&p)
+                    .map_err(|e| CliError::input(&job.template, e.to_string()))?;
+                (p.cloud, Some(tpl))
+            }
+        };
     let target: Cloud = io::read_ply(&job.target)?;
     let waypoints = job
         .waypoints
@@ -389,14 +433,32 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
              use --method paper for an unlabelled one",
         ));
     }
-    let mut outcome = register_clouds(
-        &tpl,
-        labels.as_deref(),
-        &tgt,
-        wps.as_deref(),
-        job.method,
-        progress,
-    )?;
+    let mut outcome = match prepared {
+        Some(prepared) => {
+            progress(&format!(
+                "template: prepared, {} SOM-1 nodes -> 30 rib points",
+                prepared.graph.som1.len()
+            ));
+            register_prepared(
+                prepared,
+                &tpl,
+                true,
+                &tgt,
+                wps.as_deref(),
+                job.method,
+                std::time::Duration::ZERO,
+                progress,
+            )?
+        }
+        None => register_clouds(
+            &tpl,
+            labels.as_deref(),
+            &tgt,
+            wps.as_deref(),
+            job.method,
+            progress,
+        )?,
+    };
     let t1 = Instant::now();
     let mut written: Vec<&Path> = Vec::new();
     let result = (|| -> Result<(), CliError> {

@@ -15,6 +15,11 @@ pub struct Args {
     out_dir: PathBuf,
     #[command(flatten)]
     phantom: PhantomArgs,
+    /// Also write the template's CT as a segmentation hands it over, into `OUT_DIR/ct`:
+    /// a TotalSegmentator-style labelmap, per-part STL meshes and the plan as Slicer
+    /// markups (for trying `ribreg template`).
+    #[arg(long)]
+    ct: bool,
     #[command(subcommand)]
     sweep: Option<PhantomCommand>,
 }
@@ -77,6 +82,10 @@ pub fn run(args: &Args, ctx: &Context) -> Result<(), CliError> {
     }
     let pair = PhantomPair::generate(&args.phantom.config());
     demo::write_phantom(&pair, &args.out_dir)?;
+    if args.ct {
+        ctx.progress("painting the template's CT labelmap");
+        demo::write_ct(&pair, &args.out_dir.join("ct"))?;
+    }
     println!(
         "wrote {}: template {} points, target {} points, 10 waypoints",
         args.out_dir.display(),

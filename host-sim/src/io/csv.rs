@@ -127,9 +127,104 @@ pub fn write_points_csv(path: &Path, points: &[[f64; 3]]) -> Result<(), IoError>
     write_table_csv(path, ["x", "y", "z"], points)
 }
 
+/// Split one CSV record into its fields (RFC 4180 quoting within one line).
+///
+/// An unquoted field is trimmed. A field whose first non-blank character is `"` is
+/// quoted: it runs to the next lone `"`, `""` inside it standing for one `"`, and is kept
+/// exactly (commas and spaces included); only blanks may follow it before the next comma.
+/// Quoted fields spanning lines are not supported.
+pub(super) fn split_record(line: &str) -> Result<Vec<String>, FormatError> {
+    let mut fields = Vec::new();
+    let mut rest = line;
+    loop {
+        let trimmed = rest.trim_start();
+        if let Some(quoted) = trimmed.strip_prefix('"') {
+            let mut field = String::new();
+            let mut chars = quoted.char_indices().peekable();
+            let after = loop {
+                match chars.next() {
+                    Some((_, '"')) if matches!(chars.peek(), Some((_, '"'))) => {
+                        field.push('"');
+                        chars.next();
+                    }
+                    Some((i, '"')) => break quoted.get(i + 1..).unwrap_or_default(),
+                    Some((_, c)) => field.push(c),
+                    None => {
+                        return Err(FormatError::Syntax(
+                            "quoted CSV field has no closing quote".to_owned(),
+                        ))
+                    }
+                }
+            };
+            fields.push(field);
+            let after = after.trim_start();
+            match after.strip_prefix(',') {
+                Some(next) => rest = next,
+                None if after.is_empty() => return Ok(fields),
+                None => {
+                    return Err(FormatError::Syntax(format!(
+                        "unexpected \"{}\" after a quoted CSV field",
+                        excerpt(after)
+                    )))
+                }
+            }
+        } else {
+            match rest.split_once(',') {
+                Some((field, next)) => {
+                    fields.push(field.trim().to_owned());
+                    rest = next;
+                }
+                None => {
+                    fields.push(rest.trim().to_owned());
+                    return Ok(fields);
+                }
+            }
+        }
+    }
+}
+
+/// A label as one CSV field that [`split_record`] gives back exactly: quoted when it
+/// holds a comma, a quote or surrounding blanks; refused when it holds a line break.
+pub(super) fn quote_field(label: &str) -> Result<String, FormatError> {
+    if label.contains(['\n', '\r']) {
+        return Err(FormatError::UnwritableLabel(excerpt(label)));
+    }
+    let plain = !label.contains([',', '"']) && label.trim() == label;
+    Ok(if plain {
+        label.to_owned()
+    } else {
+        format!("\"{}\"", label.replace('"', "\"\""))
+    })
+}
+
+/// Index of the column called `name` (ASCII case-insensitive) in a split header.
+pub(super) fn column(header: &[String], name: &str) -> Option<usize> {
+    header.iter().position(|h| h.eq_ignore_ascii_case(name))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn records_split_with_quotes() {
+        let s = |l: &str| split_record(l).unwrap();
+        assert_eq!(s("a, b ,c"), ["a", "b", "c"]);
+        assert_eq!(s(""), [""]);
+        assert_eq!(s("1,,2,"), ["1", "", "2", ""]);
+        assert_eq!(s(r#" "a,b" , "say ""hi""",x"#), ["a,b", "say \"hi\"", "x"]);
+        assert_eq!(s(r#""" , " padded ""#), ["", " padded "]);
+        assert!(split_record(r#""open"#).is_err());
+        assert!(split_record(r#""a"b,c"#).is_err());
+        for label in ["", "plain", "a,b", "\"q\"", " pad", "é, ü", "\"\""] {
+            let field = quote_field(label).unwrap();
+            assert_eq!(s(&format!("1,{field},2")), ["1", label, "2"], "{label:?}");
+        }
+        assert_eq!(
+            quote_field("two\nlines"),
+            Err(FormatError::UnwritableLabel("two\nlines".to_owned()))
+        );
+    }
 
     fn message(text: &str) -> String {
         parse_points_csv(text).unwrap_err().to_string()

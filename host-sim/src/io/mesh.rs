@@ -8,7 +8,7 @@ use super::ply::{parse_ply_mesh, Bytes, Scalar};
 use super::{
     check_mesh, content_lines, excerpt, parse_point, push_fan, read_bytes, text, write_atomic,
 };
-use super::{FormatError, IoError, Location, Mesh, PlyFormat};
+use super::{FormatError, IoError, Location, Mesh, PlyFormat, Space};
 
 /// Read a triangle mesh from `path`, choosing the format by extension
 /// (case-insensitive):
@@ -28,6 +28,13 @@ use super::{FormatError, IoError, Location, Mesh, PlyFormat};
 /// [`parse_ply`](super::parse_ply) for PLY), a non-finite coordinate, a face index out of
 /// range, a face with fewer than three corners, no vertices or no triangles.
 pub fn read_mesh(path: &Path) -> Result<Mesh, IoError> {
+    let (_, parse) = parser(path)?;
+    parse(&read_bytes(path)?).map_err(|e| e.with_path(path))
+}
+
+/// The lower-case extension of `path` and the parser for it.
+#[allow(clippy::type_complexity)]
+fn parser(path: &Path) -> Result<(String, fn(&[u8]) -> Result<Mesh, IoError>), IoError> {
     let extension = path
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
@@ -38,7 +45,116 @@ pub fn read_mesh(path: &Path) -> Result<Mesh, IoError> {
         "stl" => parse_stl,
         _ => return Err(IoError::from(FormatError::UnknownExtension(extension)).with_path(path)),
     };
-    parse(&read_bytes(path)?).map_err(|e| e.with_path(path))
+    Ok((extension, parse))
+}
+
+/// Read a triangle mesh as [`read_mesh`] does and bring its vertices into ribreg's
+/// patient frame, from the coordinate system the file declares or else `default`.
+/// Returns the mesh (patient frame) and the space that was converted from.
+///
+/// The declaration is a `SPACE=LPS` or `SPACE=RAS` token (as 3D Slicer writes it, any
+/// case of the value) in:
+///
+/// - an STL file's header: the 80-byte header of a binary STL, the `solid` line of an
+///   ASCII one;
+/// - a PLY header `comment` (or `obj_info`) line, e.g. `comment SPACE=LPS`;
+/// - an OBJ comment line, e.g. `# SPACE=LPS`.
+///
+/// The first declaration found counts. Pass `default` = [`Space::Patient`] for files
+/// known to be in ribreg's frame already (ribreg's own output). The conversion is a
+/// proper rotation, so triangle orientation is kept.
+///
+/// # Errors
+///
+/// Those of [`read_mesh`], and [`FormatError::UnknownSpace`] (with the path) for a
+/// `SPACE=` value other than RAS or LPS.
+pub fn read_mesh_in(path: &Path, default: Space) -> Result<(Mesh, Space), IoError> {
+    let (extension, parse) = parser(path)?;
+    let bytes = read_bytes(path)?;
+    let mut mesh = parse(&bytes).map_err(|e| e.with_path(path))?;
+    let space = declared_space(&extension, &bytes)
+        .map_err(|kind| IoError::from(kind).with_path(path))?
+        .unwrap_or(default);
+    for v in &mut mesh.vertices {
+        *v = space.to_patient(*v);
+    }
+    Ok((mesh, space))
+}
+
+/// The space a mesh file of this (parsed, so well-formed) kind declares, if any.
+fn declared_space(extension: &str, bytes: &[u8]) -> Result<Option<Space>, FormatError> {
+    let lines = || bytes.split(|&b| b == b'\n').map(<[u8]>::trim_ascii);
+    match extension {
+        "stl" => {
+            let binary = bytes
+                .get(80..84)
+                .and_then(|b| b.try_into().ok())
+                .map(u32::from_le_bytes)
+                .is_some_and(|n| 84 + 50 * u64::from(n) == bytes.len() as u64);
+            if binary {
+                find_space(bytes.get(..80).unwrap_or_default())
+            } else {
+                find_space(lines().find(|l| !l.is_empty()).unwrap_or_default())
+            }
+        }
+        "ply" => {
+            for line in lines().take_while(|l| *l != b"end_header") {
+                if line.starts_with(b"comment") || line.starts_with(b"obj_info") {
+                    if let Some(space) = find_space(line)? {
+                        return Ok(Some(space));
+                    }
+                }
+            }
+            Ok(None)
+        }
+        _ => {
+            for line in lines().filter(|l| l.starts_with(b"#")) {
+                if let Some(space) = find_space(line)? {
+                    return Ok(Some(space));
+                }
+            }
+            Ok(None)
+        }
+    }
+}
+
+/// [`declared_space`] of every kind, for the fixture tests' garbage runs.
+#[cfg(test)]
+pub(super) fn tests_declared_space(bytes: &[u8]) -> Vec<Result<Option<Space>, FormatError>> {
+    ["stl", "ply", "obj"]
+        .iter()
+        .map(|e| declared_space(e, bytes))
+        .collect()
+}
+
+/// The value of the first `SPACE=` token in `text` (not preceded by a letter or digit):
+/// RAS or LPS, any case.
+fn find_space(text: &[u8]) -> Result<Option<Space>, FormatError> {
+    const KEY: &[u8] = b"SPACE=";
+    let mut from = 0;
+    while let Some(i) = text
+        .get(from..)
+        .and_then(|rest| rest.windows(KEY.len()).position(|w| w == KEY))
+    {
+        let start = from + i;
+        from = start + KEY.len();
+        if start > 0 && text[start - 1].is_ascii_alphanumeric() {
+            continue;
+        }
+        let value: Vec<u8> = text[from..]
+            .iter()
+            .copied()
+            .take_while(|b| b.is_ascii_alphanumeric() || *b == b'-' || *b == b'_')
+            .take(40)
+            .collect();
+        let value = String::from_utf8_lossy(&value).into_owned();
+        return match value.to_ascii_uppercase().as_str() {
+            "RAS" => Ok(Some(Space::Ras)),
+            "LPS" => Ok(Some(Space::Lps)),
+            _ => Err(FormatError::UnknownSpace(value)),
+        };
+    }
+    Ok(None)
 }
 
 /// Write `mesh` to `path` as Wavefront OBJ (`v x y z` lines, then 1-based
@@ -488,6 +604,68 @@ mod tests {
         );
         let missing = dir.path().join("missing.obj");
         assert!(matches!(read_mesh(&missing), Err(IoError::Io { .. })));
+    }
+
+    #[test]
+    fn declared_spaces_convert_to_the_patient_frame() {
+        let dir = tempfile::tempdir().unwrap();
+        let mesh = square_mesh();
+        let in_space = |s: Space| {
+            mesh.vertices
+                .iter()
+                .map(|&v| s.to_patient(v))
+                .collect::<Vec<_>>()
+        };
+        let read = |name: &str, bytes: &[u8], default: Space| {
+            let path = dir.path().join(name);
+            std::fs::write(&path, bytes).unwrap();
+            read_mesh_in(&path, default)
+        };
+        let stl = binary_stl(b"3D Slicer output. SPACE=LPS", &SQUARE);
+        let (m, s) = read("a.stl", &stl, Space::Patient).unwrap();
+        assert_eq!((m.vertices, s), (in_space(Space::Lps), Space::Lps));
+        assert_eq!(m.triangles, mesh.triangles);
+        let ascii = ASCII_STL.replace("solid square\n", "solid ras SPACE=ras\n");
+        let (m, s) = read("a.stl", ascii.as_bytes(), Space::Lps).unwrap();
+        assert_eq!((m.vertices, s), (in_space(Space::Ras), Space::Ras));
+        // Undeclared: the default; a SPACE= in a later line of ASCII STL does not count.
+        let (m, s) = read("a.stl", ASCII_STL.as_bytes(), Space::Lps).unwrap();
+        assert_eq!((m.vertices, s), (in_space(Space::Lps), Space::Lps));
+        let (_, s) = read(
+            "a.stl",
+            &binary_stl(b"COLORSPACE=RAS", &SQUARE),
+            Space::Patient,
+        )
+        .unwrap();
+        assert_eq!(s, Space::Patient);
+        let obj = format!("# SPACE=LPS\n{OBJ}");
+        assert_eq!(
+            read("a.obj", obj.as_bytes(), Space::Ras).unwrap().1,
+            Space::Lps
+        );
+        let ply = dir.path().join("a.ply");
+        super::super::write_mesh_ply(&ply, &mesh).unwrap();
+        let text = std::fs::read(&ply).unwrap();
+        let text = String::from_utf8_lossy(&text).replacen("ply\n", "ply\ncomment SPACE=RAS\n", 1);
+        let (m, s) = read("a.ply", text.as_bytes(), Space::Lps).unwrap();
+        assert_eq!((m.vertices, s), (in_space(Space::Ras), Space::Ras));
+
+        let bad = binary_stl(b"SPACE=XYZ", &SQUARE);
+        let e = read("bad.stl", &bad, Space::Patient).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "{}: unknown coordinate system \"XYZ\" (expected RAS or LPS)",
+                dir.path().join("bad.stl").display()
+            )
+        );
+        assert!(read("bad.obj", b"# SPACE=\nv 0 0 0\n", Space::Patient).is_err());
+        // Content errors come first, with the path.
+        assert!(read("bad.stl", b"SPACE=XYZ", Space::Patient)
+            .unwrap_err()
+            .to_string()
+            .contains("not an STL file"));
+        assert!(read("a.off", b"", Space::Patient).is_err());
     }
 
     #[test]

@@ -703,6 +703,75 @@ pub fn read_ply(path: &Path) -> Result<Cloud, IoError> {
     parse_ply(&read_bytes(path)?).map_err(|e| e.with_path(path))
 }
 
+/// One element of a PLY file with its scalar properties, decoded (see [`parse_ply_elements`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlyElement {
+    /// The element's name (`vertex`, `face`, `node`...).
+    pub name: String,
+    /// The names of its scalar properties, in declaration order (list properties are
+    /// left out).
+    pub properties: Vec<String>,
+    /// Each instance's scalar values, in the order of `properties`. Every PLY scalar
+    /// type is exact in an f64.
+    pub rows: Vec<Vec<f64>>,
+}
+
+impl PlyElement {
+    /// The index of scalar property `name` in `properties`.
+    pub fn property(&self, name: &str) -> Option<usize> {
+        self.properties.iter().position(|p| p == name)
+    }
+}
+
+/// Decode every element of a PLY file (any element names), for files that carry more
+/// than a cloud or a mesh (ribreg's prepared templates). List properties are checked and
+/// skipped. Non-finite values are kept: the caller decides what a value means. Header
+/// counts never drive allocation beyond what the body could hold.
+///
+/// # Errors
+///
+/// The errors of [`parse_ply`] about the header and the body, except that no `vertex`
+/// element or property is required.
+pub fn parse_ply_elements(bytes: &[u8]) -> Result<Vec<PlyElement>, IoError> {
+    let header = parse_header(bytes)?;
+    let body_len = bytes.len().saturating_sub(header.body_start);
+    let mut out: Vec<PlyElement> = header
+        .elements
+        .iter()
+        .map(|e| PlyElement {
+            name: e.name.clone(),
+            properties: e
+                .properties
+                .iter()
+                .filter(|p| matches!(p.ty, PropertyType::Scalar(_)))
+                .map(|p| p.name.clone())
+                .collect(),
+            rows: Vec::with_capacity(e.reserve_hint(header.format, body_len)),
+        })
+        .collect();
+    let scalars: Vec<Vec<usize>> = header
+        .elements
+        .iter()
+        .map(|e| {
+            e.properties
+                .iter()
+                .enumerate()
+                .filter(|(_, p)| matches!(p.ty, PropertyType::Scalar(_)))
+                .map(|(i, _)| i)
+                .collect()
+        })
+        .collect();
+    decode_body(&header, bytes, &mut |e, row| {
+        if let (Some(element), Some(scalars)) = (out.get_mut(e), scalars.get(e)) {
+            element
+                .rows
+                .push(scalars.iter().map(|&i| row.scalar(i)).collect());
+        }
+        Ok(())
+    })?;
+    Ok(out)
+}
+
 /// Decode a PLY mesh: `vertex` (x, y, z) and `face` (`vertex_indices` lists,
 /// polygons fan-triangulated) elements; other elements and properties are skipped.
 pub(super) fn parse_ply_mesh(bytes: &[u8]) -> Result<Mesh, IoError> {

@@ -28,7 +28,7 @@ use crate::io::{excerpt, text, FormatError, IoError, Location, Space};
 /// [`FormatError::NotNrrd`]; [`FormatError::NrrdField`] for a missing or malformed field,
 /// a detached `data file`, a multi-layer segment or an unsupported encoding;
 /// [`FormatError::VolumeDimension`] for anything but 3-D (a 4-D multi-layer segmentation
-/// must be exported as a labelmap); [`FormatError::UnknownSpace`] without a `space` RAS or
+/// must be exported as a labelmap); [`FormatError::NoSpace`] without a `space`, [`FormatError::UnknownSpace`] for one not RAS or
 /// LPS; [`FormatError::VolumeDatatype`], [`FormatError::EmptyVolume`],
 /// [`FormatError::VolumeTooLarge`] (before allocating), [`FormatError::VolumeTruncated`],
 /// [`FormatError::TrailingData`], [`FormatError::Gzip`],
@@ -289,7 +289,7 @@ impl<'a> Header<'a> {
                     ))
                 }
             },
-            None => return Err(FormatError::UnknownSpace(String::new()).into()),
+            None => return Err(FormatError::NoSpace.into()),
         };
         let (n, directions) = self.require("space directions")?;
         let columns = vectors(directions).map_err(|p| at(n, "space directions", p))?;

@@ -494,7 +494,7 @@ fn nrrd_refusals() {
     let body = [0u8, 1, 2, 3];
     // No space, unknown space.
     let e = read_labelmap(&fixture("nospace.nrrd")).unwrap_err();
-    assert_eq!(kind(&e), &FormatError::UnknownSpace(String::new()));
+    assert_eq!(kind(&e), &FormatError::NoSpace);
     assert!(e.to_string().contains("refusing to guess"), "{e}");
     assert_eq!(
         k(&GOOD.replace("LPS", "scanner-xyz"), &body),

@@ -1,0 +1,74 @@
+#!/usr/bin/env python3
+"""Whole-process `ribreg register` with a prepared template against one Open3D ICP call
+on the same phantom pair, measured in the same run (issue 14's speed goal: ours at most a
+quarter of Open3D's ICP).
+
+    python3 host-sim/benches/against_open3d.py [path/to/ribreg] [--repeats 15] [--seeds 0 1 2]
+
+`ribreg` defaults to target/release/ribreg (build it with `cargo build --release -p
+ribreg-sim`). Needs open3d (tests/fixtures/formats/requirements.txt pins the version).
+
+Ours: the wall time of the whole `ribreg register` process (start, read the prepared
+template and the target, register, map the template and the waypoints, ED/HD, write
+every output). Open3D: the wall time of one `registration_icp` call alone (point to
+point, identity start, 20 mm correspondence distance, at most 100 iterations), the
+clouds already in memory and no KD-tree reuse between calls. Medians over the repeats;
+the ratio per seed and over all seeds is printed.
+"""
+
+import argparse
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import open3d as o3d
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("ribreg", nargs="?", default="target/release/ribreg")
+    ap.add_argument("--repeats", type=int, default=15)
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    args = ap.parse_args()
+    ratios = []
+    print(f"open3d {o3d.__version__}, ribreg {args.ribreg}, {args.repeats} repeats")
+    print("| seed | template / target points | ribreg register (whole process) | Open3D ICP call | ratio |")
+    print("|---|---|---|---|---|")
+    for seed in args.seeds:
+        with tempfile.TemporaryDirectory() as tmp:
+            d = Path(tmp)
+            run = lambda *a: subprocess.run([args.ribreg, "-q", *a], check=True, capture_output=True)
+            run("phantom", "--seed", str(seed), "--variant", "misaligned", "--out-dir", str(d))
+            run("template", "--cloud", str(d / "template.ply"), "--out", str(d / "t.ply"),
+                "--prepared", str(d / "prepared.ply"))
+            reg = ["register", "--template", str(d / "prepared.ply"), "--target", str(d / "target.ply"),
+                   "--waypoints", str(d / "waypoints.csv"), "--out", str(d / "out.ply"),
+                   "--out-waypoints", str(d / "out.csv")]
+            ours = []
+            for _ in range(args.repeats):
+                t = time.perf_counter()
+                run(*reg)
+                ours.append(time.perf_counter() - t)
+            src = o3d.io.read_point_cloud(str(d / "template.ply"))
+            tgt = o3d.io.read_point_cloud(str(d / "target.ply"))
+            theirs = []
+            for _ in range(args.repeats):
+                t = time.perf_counter()
+                o3d.pipelines.registration.registration_icp(
+                    src, tgt, 20.0, np.eye(4),
+                    o3d.pipelines.registration.TransformationEstimationPointToPoint(),
+                    o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=100))
+                theirs.append(time.perf_counter() - t)
+            a, b = statistics.median(ours), statistics.median(theirs)
+            ratios.append(a / b)
+            print(f"| {seed} | {len(src.points)} / {len(tgt.points)} | {a * 1e3:.1f} ms | {b * 1e3:.1f} ms | {a / b:.2f} |")
+    print(f"median ratio ribreg / Open3D: {statistics.median(ratios):.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
