@@ -12,3 +12,4 @@ pub mod register;
 pub mod sample;
 pub mod stats;
 pub mod sweep;
+pub mod template;

@@ -1,0 +1,3 @@
+//! CT template clouds: preparing a template for `ribreg template` (automatic labelling).
+
+pub mod autolabel;
