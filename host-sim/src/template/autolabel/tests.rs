@@ -152,6 +152,29 @@ fn autolabel_refuses_a_missing_cartilage() {
 }
 
 #[test]
+fn autolabel_refuses_sides_at_different_heights() {
+    let pair = template_cloud(&SubjectParams::template(), 2.5, 8);
+    for shift in [-15.0, 15.0] {
+        // The patient-left half slid caudally/cranially by more than half a rib gap.
+        let slid: Vec<[f64; 3]> = pair
+            .template
+            .points
+            .iter()
+            .map(|&[x, y, z]| {
+                if x > 0.0 {
+                    [x, y + shift, z]
+                } else {
+                    [x, y, z]
+                }
+            })
+            .collect();
+        let err = auto_labels(&slid).expect_err("slid sides labelled");
+        println!("left half slid {shift} mm: {err}");
+        assert!(matches!(err, AutoLabelError::SidesDisagree { .. }), "{err}");
+    }
+}
+
+#[test]
 fn autolabel_refuses_a_single_side() {
     let pair = template_cloud(&SubjectParams::template(), 2.5, 6);
     // The sternum and the left cartilages only.
