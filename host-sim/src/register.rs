@@ -61,16 +61,21 @@ pub struct RegisterJob {
     /// or a prepared template (`ribreg template --prepared`, improved method).
     #[arg(long)]
     pub template: PathBuf,
-    /// US target point cloud (PLY).
+    /// US target point cloud: PLY, PCD (ascii, binary, binary_compressed), XYZ or CSV.
     #[arg(long)]
     pub target: PathBuf,
-    /// Planned waypoints on the template (CSV with header `x,y,z`, mm).
+    /// Planned waypoints on the template: CSV (`x,y,z` in the template's frame, other
+    /// columns such as `label` allowed; or 3D Slicer's `label,l,p,s,...` / `label,r,a,s,...`),
+    /// Slicer Markups `.mrk.json` or `.fcsv`. Slicer's LPS / RAS coordinates are converted
+    /// into ribreg's patient frame; labels are kept.
     #[arg(long)]
     pub waypoints: Option<PathBuf>,
     /// Output: the template's points, same order, registered (PLY).
     #[arg(long)]
     pub out: PathBuf,
-    /// Output: mapped waypoints (CSV `x,y,z`).
+    /// Output: mapped waypoints, in the target's frame, labels kept: CSV (`x,y,z` and
+    /// `label` when the input had labels) or Slicer Markups `.mrk.json`, by the
+    /// extension.
     #[arg(long)]
     pub out_waypoints: Option<PathBuf>,
     /// Output: JSON report (skeletons, rigid part, ED/HD, timings).
@@ -359,6 +364,19 @@ fn ms(d: std::time::Duration) -> f64 {
     d.as_secs_f64() * 1e3
 }
 
+/// A `--template` file: a PLY (a cloud, or a prepared template), or a cloud in any
+/// format [`io::read_cloud`] reads.
+fn read_template(path: &Path) -> Result<TemplateFile, CliError> {
+    let ply = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("ply"));
+    Ok(if ply {
+        io::prepared::read_template_file(path)?
+    } else {
+        TemplateFile::Cloud(io::read_cloud(path)?)
+    })
+}
+
 /// Runs `ribreg register`. Nothing is written unless everything succeeded; outputs
 /// written before a failing one are removed again.
 pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<RegisterOutcome, CliError> {
@@ -382,28 +400,28 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
         }
     }
     let t0 = Instant::now();
-    let (template, prepared): (Cloud, Option<Template>) =
-        match io::prepared::read_template_file(&job.template)? {
-            TemplateFile::Cloud(c) => (c, None),
-            TemplateFile::Prepared(p) => {
-                if job.method != Method::Improved {
-                    return Err(CliError::Usage(format!(
-                        "{}: a prepared template is the improved method's; \
+    let (template, prepared): (Cloud, Option<Template>) = match read_template(&job.template)? {
+        TemplateFile::Cloud(c) => (c, None),
+        TemplateFile::Prepared(p) => {
+            if job.method != Method::Improved {
+                return Err(CliError::Usage(format!(
+                    "{}: a prepared template is the improved method's; \
                          give --method paper the template cloud instead",
-                        job.template.display()
-                    )));
-                }
-                let tpl = crate::template::prepared::from_file(&p)
-                    .map_err(|e| CliError::input(&job.template, e.to_string()))?;
-                (p.cloud, Some(tpl))
+                    job.template.display()
+                )));
             }
-        };
-    let target: Cloud = io::read_ply(&job.target)?;
-    let waypoints = job
+            let tpl = crate::template::prepared::from_file(&p)
+                .map_err(|e| CliError::input(&job.template, e.to_string()))?;
+            (p.cloud, Some(tpl))
+        }
+    };
+    let target: Cloud = io::read_cloud(&job.target)?;
+    let planned = job
         .waypoints
         .as_deref()
-        .map(io::read_points_csv)
+        .map(io::read_waypoints)
         .transpose()?;
+    let waypoints = planned.as_ref().map(|w| w.points.clone());
     let labels = to_core_labels(&job.template, &template.labels)?;
     let tpl = to_core(&template.points, Which::Template)?;
     let tgt = to_core(&target.points, Which::Target)?;
@@ -474,7 +492,17 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
         io::write_ply(&job.out, &out, format)?;
         written.push(&job.out);
         if let (Some(path), Some(w)) = (&job.out_waypoints, &outcome.waypoints) {
-            io::write_points_csv(path, &to_file(w))?;
+            let labels = planned
+                .as_ref()
+                .map(|p| p.labels.clone())
+                .unwrap_or_default();
+            io::write_waypoints(
+                path,
+                &io::Waypoints {
+                    points: to_file(w),
+                    labels,
+                },
+            )?;
             written.push(path);
         }
         if let Some(path) = &job.report {

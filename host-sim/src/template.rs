@@ -5,9 +5,9 @@
 //! Labels are ribreg's: 1 = sternum, 2..=5 = the costal cartilage of that rib (both
 //! sides share a rib's label), 0 = not used.
 
-pub mod labelmap;
-pub mod prepared;
 pub mod autolabel;
 mod job;
+pub mod labelmap;
+pub mod prepared;
 
 pub use job::{run, TemplateJob, TemplateOutcome};

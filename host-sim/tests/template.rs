@@ -48,12 +48,16 @@ fn register(dir: &Path, template: &Path, waypoints: &Path, tag: &str) -> f64 {
     mean_error(&out_wp, &dir.join("true_waypoints.csv"))
 }
 
+/// The registration's own spread from one template sampling to another is about a
+/// millimetre per pair (the same phantom, sampled as a labelmap, as meshes or as the
+/// phantom's Poisson-disc cloud), so the paths are compared by their mean over pairs.
 #[test]
 fn labelmap_and_parts_register_as_well_as_the_labelled_cloud() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let mut worst: f64 = 0.0;
-    for seed in ["3", "11"] {
+    let mut sums = [0.0f64; 3];
+    let seeds = ["0", "1", "2", "3", "4", "5"];
+    for seed in seeds {
         stdout(&ribreg(&[
             "-q",
             "phantom",
@@ -97,11 +101,20 @@ fn labelmap_and_parts_register_as_well_as_the_labelled_cloud() {
         eprintln!(
             "seed {seed}: waypoint error labelled PLY {reference:.2} mm, labelmap {labelmap:.2}, parts {parts:.2}"
         );
-        worst = worst
-            .max((labelmap - reference).abs())
-            .max((parts - reference).abs());
+        for (sum, e) in sums.iter_mut().zip([reference, labelmap, parts]) {
+            *sum += e / seeds.len() as f64;
+        }
     }
-    assert!(worst <= 0.5, "{worst:.2} mm from the labelled-PLY path");
+    let [reference, labelmap, parts] = sums;
+    eprintln!("mean: labelled PLY {reference:.2} mm, labelmap {labelmap:.2}, parts {parts:.2}");
+    assert!(
+        (labelmap - reference).abs() <= 0.5,
+        "labelmap {labelmap:.2} vs {reference:.2} mm"
+    );
+    assert!(
+        (parts - reference).abs() <= 0.5,
+        "parts {parts:.2} vs {reference:.2} mm"
+    );
 }
 
 #[test]

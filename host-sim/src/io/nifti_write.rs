@@ -28,7 +28,10 @@ pub fn nifti_bytes(volume: &LabelVolume) -> Result<Vec<u8>, IoError> {
     let put_i16 = |h: &mut [u8], at: usize, v: i16| h[at..at + 2].copy_from_slice(&v.to_le_bytes());
     let put_f32 = |h: &mut [u8], at: usize, v: f32| h[at..at + 4].copy_from_slice(&v.to_le_bytes());
     h[0..4].copy_from_slice(&348i32.to_le_bytes());
-    for (k, v) in [3, dims[0], dims[1], dims[2], 1, 1, 1, 1].into_iter().enumerate() {
+    for (k, v) in [3, dims[0], dims[1], dims[2], 1, 1, 1, 1]
+        .into_iter()
+        .enumerate()
+    {
         put_i16(&mut h, 40 + 2 * k, v);
     }
     // datatype: 2 = uint8, 512 = uint16; bitpix.
@@ -44,7 +47,7 @@ pub fn nifti_bytes(volume: &LabelVolume) -> Result<Vec<u8>, IoError> {
     h[123] = 2; // xyzt_units: mm
     h[148..148 + 25].copy_from_slice(b"ribreg phantom labelmap\0\0");
     put_i16(&mut h, 254, 1); // sform_code: scanner
-    // The affine in RAS: the patient-frame columns and offset taken into RAS.
+                             // The affine in RAS: the patient-frame columns and offset taken into RAS.
     let column = |a: usize| Space::Ras.from_patient([0, 1, 2].map(|r| volume.linear[r][a]));
     let offset = Space::Ras.from_patient(volume.offset);
     let cols = [column(0), column(1), column(2)];

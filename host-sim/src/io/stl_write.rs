@@ -14,8 +14,9 @@ use super::{check_mesh, write_atomic, FormatError, IoError, Mesh, Space};
 /// [`IoError::Io`] if the file cannot be written.
 pub fn write_mesh_stl(path: &Path, mesh: &Mesh, space: Space) -> Result<(), IoError> {
     check_mesh(mesh).map_err(|e| e.with_path(path))?;
-    let count = u32::try_from(mesh.triangles.len())
-        .map_err(|_| IoError::from(FormatError::TooManyVertices(mesh.triangles.len())).with_path(path))?;
+    let count = u32::try_from(mesh.triangles.len()).map_err(|_| {
+        IoError::from(FormatError::TooManyVertices(mesh.triangles.len())).with_path(path)
+    })?;
     write_atomic(path, |out| {
         let mut header = [b' '; 80];
         let text = format!("ribreg SPACE={}", space.name());

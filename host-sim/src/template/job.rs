@@ -114,7 +114,8 @@ pub fn run(job: &TemplateJob, progress: &mut dyn FnMut(&str)) -> Result<Template
         let ids = match &job.label_map {
             Some(map) => LabelIds::from_json(map)?,
             None if !volume.segments.is_empty() => {
-                let ids = LabelIds::from_names(volume.segments.iter().map(|(n, v)| (n.as_str(), *v)));
+                let ids =
+                    LabelIds::from_names(volume.segments.iter().map(|(n, v)| (n.as_str(), *v)));
                 if ids.sternum.is_empty() || ids.cartilage.is_empty() {
                     return Err(CliError::input(
                         path,
@@ -135,9 +136,9 @@ pub fn run(job: &TemplateJob, progress: &mut dyn FnMut(&str)) -> Result<Template
         };
         let mut spaces = Vec::new();
         for (k, part) in job.parts.iter().enumerate() {
-            let (label, file) = part.split_once('=').ok_or_else(|| {
-                CliError::Usage(format!("--part {part}: expected LABEL=FILE"))
-            })?;
+            let (label, file) = part
+                .split_once('=')
+                .ok_or_else(|| CliError::Usage(format!("--part {part}: expected LABEL=FILE")))?;
             let label = part_label(label).ok_or_else(|| {
                 CliError::Usage(format!(
                     "--part {part}: label \"{label}\" is not sternum or a rib 2..5"
@@ -145,8 +146,9 @@ pub fn run(job: &TemplateJob, progress: &mut dyn FnMut(&str)) -> Result<Template
             })?;
             let file = Path::new(file);
             let (mesh, space) = io::read_mesh_in(file, job.space)?;
-            let points = crate::sample::poisson_disc(&mesh, job.spacing, job.seed.wrapping_add(k as u64))
-                .map_err(|e| CliError::input(file, e.to_string()))?;
+            let points =
+                crate::sample::poisson_disc(&mesh, job.spacing, job.seed.wrapping_add(k as u64))
+                    .map_err(|e| CliError::input(file, e.to_string()))?;
             progress(&format!(
                 "{}: {} points labelled {label} ({} frame)",
                 file.display(),
@@ -160,7 +162,10 @@ pub fn run(job: &TemplateJob, progress: &mut dyn FnMut(&str)) -> Result<Template
                 l.extend(std::iter::repeat_n(label, n));
             }
         }
-        (cloud, format!("{} meshes ({})", job.parts.len(), spaces.join(", ")))
+        (
+            cloud,
+            format!("{} meshes ({})", job.parts.len(), spaces.join(", ")),
+        )
     } else if let Some(path) = &job.cloud {
         let mut cloud = io::read_cloud(path)?;
         if job.space != Space::Patient {
@@ -171,8 +176,9 @@ pub fn run(job: &TemplateJob, progress: &mut dyn FnMut(&str)) -> Result<Template
         match &cloud.labels {
             Some(_) => (cloud, format!("{}: labels as given", path.display())),
             None => {
-                let found = auto_labels(&cloud.points)
-                    .map_err(|e| CliError::input(path, format!("cannot label it automatically: {e}")))?;
+                let found = auto_labels(&cloud.points).map_err(|e| {
+                    CliError::input(path, format!("cannot label it automatically: {e}"))
+                })?;
                 let line = format!("{}: labels found automatically ({found})", path.display());
                 cloud.labels = Some(found.labels);
                 (cloud, line)
@@ -196,7 +202,13 @@ pub fn run(job: &TemplateJob, progress: &mut dyn FnMut(&str)) -> Result<Template
         .unwrap_or(Path::new("--part"));
     let missing: Vec<String> = (1..=5)
         .filter(|&l| counts[l] == 0)
-        .map(|l| if l == 1 { "sternum".to_owned() } else { format!("rib {l}") })
+        .map(|l| {
+            if l == 1 {
+                "sternum".to_owned()
+            } else {
+                format!("rib {l}")
+            }
+        })
         .collect();
     if !missing.is_empty() {
         return Err(CliError::input(
