@@ -69,7 +69,7 @@ pub fn write_ct(pair: &PhantomPair, dir: &Path) -> Result<(), CliError> {
         source,
     })?;
     let volume = crate::phantom::ct::labelmap(&pair.template_params);
-    io::write_nifti(&dir.join("labelmap.nii.gz"), &volume)?;
+    io::volume::write_nifti(&dir.join("labelmap.nii.gz"), &volume)?;
     for (label, mesh) in crate::phantom::ct::part_meshes(&pair.template_params) {
         let name = if label == 1 {
             "sternum.stl".to_owned()

@@ -27,13 +27,11 @@ mod fixtures;
 mod lzf;
 mod markups;
 mod mesh;
-mod nifti_write;
 mod pcd;
 pub mod plus;
 mod ply;
 pub mod prepared;
 pub mod space;
-mod stl_write;
 pub mod volume;
 mod waypoints;
 mod xyz;
@@ -44,12 +42,10 @@ pub use csv::{
     write_table_csv,
 };
 pub use markups::{parse_fcsv, parse_markups_json};
-pub use mesh::{read_mesh, read_mesh_in, write_mesh_obj};
-pub use nifti_write::{nifti_bytes, write_nifti};
+pub use mesh::{read_mesh, read_mesh_in, write_mesh_obj, write_mesh_stl};
 pub use pcd::{parse_pcd, read_pcd};
 pub use ply::{parse_ply, parse_ply_elements, read_ply, write_mesh_ply, write_ply, PlyElement};
 pub use space::Space;
-pub use stl_write::write_mesh_stl;
 pub use waypoints::{parse_waypoints_csv, read_waypoints, write_waypoints, Waypoints};
 pub use xyz::{parse_xyz, read_xyz};
 

@@ -167,7 +167,7 @@ fn a_prepared_template_registers_bit_for_bit_like_its_cloud() {
 fn labelmap_with(path: &Path, edit: impl Fn(&mut ribreg_sim::io::volume::LabelVolume)) {
     let mut v = ribreg_sim::phantom::ct::labelmap(&ribreg_sim::phantom::SubjectParams::template());
     edit(&mut v);
-    ribreg_sim::io::write_nifti(path, &v).unwrap();
+    ribreg_sim::io::volume::write_nifti(path, &v).unwrap();
 }
 
 fn refused(args: &[&str], out: &Path, expect: &str) {
@@ -259,5 +259,64 @@ fn an_off_by_one_rib_numbering_is_reported_and_overridden() {
     assert_eq!(
         std::fs::read(d.join("a.ply")).unwrap(),
         std::fs::read(d.join("b.ply")).unwrap()
+    );
+}
+
+#[test]
+fn an_unlabelled_cloud_is_labelled_by_the_rule_or_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    stdout(&ribreg(&[
+        "-q",
+        "phantom",
+        "--seed",
+        "2",
+        "--out-dir",
+        s(d),
+    ]));
+    let truth = ribreg_sim::io::read_ply(&d.join("template.ply")).unwrap();
+    // As Open3D would hand it over: an XYZ file, no labels.
+    let xyz: String = truth
+        .points
+        .iter()
+        .map(|p| format!("{} {} {}\n", p[0], p[1], p[2]))
+        .collect();
+    std::fs::write(d.join("t.xyz"), xyz).unwrap();
+    let log = ribreg(&[
+        "template",
+        "--cloud",
+        s(&d.join("t.xyz")),
+        "--out",
+        s(&d.join("t.ply")),
+    ]);
+    assert!(
+        log.status.success(),
+        "{}",
+        String::from_utf8_lossy(&log.stderr)
+    );
+    assert!(String::from_utf8_lossy(&log.stderr).contains("labels found automatically"));
+    let got = ribreg_sim::io::read_ply(&d.join("t.ply")).unwrap();
+    let (a, b) = (truth.labels.unwrap(), got.labels.unwrap());
+    let agree = a.iter().zip(&b).filter(|(x, y)| x == y).count() as f64 / a.len() as f64;
+    assert!(agree >= 0.99, "{agree}");
+    // Without rib 5's left cartilage the rule refuses instead of guessing.
+    let xyz: String = truth
+        .points
+        .iter()
+        .zip(&a)
+        .filter(|(p, l)| !(**l == 5 && p[0] > 0.0))
+        .map(|(p, _)| format!("{} {} {}\n", p[0], p[1], p[2]))
+        .collect();
+    std::fs::write(d.join("u.xyz"), xyz).unwrap();
+    refused(
+        &[
+            "template",
+            "--cloud",
+            s(&d.join("u.xyz")),
+            "--out",
+            s(&d.join("u.ply")),
+        ],
+        &d.join("u.ply"),
+        "cannot label it automatically",
     );
 }

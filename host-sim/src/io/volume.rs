@@ -45,7 +45,7 @@ mod nrrd;
 #[cfg(test)]
 mod tests;
 
-pub use self::nifti::parse_nifti;
+pub use self::nifti::{nifti_bytes, parse_nifti, write_nifti};
 pub use self::nrrd::parse_nrrd;
 
 /// Most voxels a volume may have: 2^28 = 268,435,456, i.e. `labels` takes at most 512 MiB
