@@ -33,18 +33,27 @@ def main() -> int:
     ap.add_argument("ribreg", nargs="?", default="target/release/ribreg")
     ap.add_argument("--repeats", type=int, default=15)
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    ap.add_argument("--spacing", type=float, default=None,
+                    help="template from the phantom's CT labelmap (phantom --ct) at this spacing, mm, "
+                         "instead of the phantom's 2.5 mm template cloud")
     args = ap.parse_args()
     ratios = []
-    print(f"open3d {o3d.__version__}, ribreg {args.ribreg}, {args.repeats} repeats")
+    what = f"template from the CT labelmap at {args.spacing} mm" if args.spacing else "the phantom's template cloud"
+    print(f"open3d {o3d.__version__}, ribreg {args.ribreg}, {args.repeats} repeats, {what}")
     print("| seed | template / target points | ribreg register (whole process) | Open3D ICP call | ratio |")
     print("|---|---|---|---|---|")
     for seed in args.seeds:
         with tempfile.TemporaryDirectory() as tmp:
             d = Path(tmp)
             run = lambda *a: subprocess.run([args.ribreg, "-q", *a], check=True, capture_output=True)
-            run("phantom", "--seed", str(seed), "--variant", "misaligned", "--out-dir", str(d))
-            run("template", "--cloud", str(d / "template.ply"), "--out", str(d / "t.ply"),
-                "--prepared", str(d / "prepared.ply"))
+            run("phantom", "--seed", str(seed), "--variant", "misaligned", "--out-dir", str(d),
+                *(["--ct"] if args.spacing else []))
+            if args.spacing:
+                run("template", "--labelmap", str(d / "ct" / "labelmap.nii.gz"), "--spacing",
+                    str(args.spacing), "--out", str(d / "t.ply"), "--prepared", str(d / "prepared.ply"))
+            else:
+                run("template", "--cloud", str(d / "template.ply"), "--out", str(d / "t.ply"),
+                    "--prepared", str(d / "prepared.ply"))
             reg = ["register", "--template", str(d / "prepared.ply"), "--target", str(d / "target.ply"),
                    "--waypoints", str(d / "waypoints.csv"), "--out", str(d / "out.ply"),
                    "--out-waypoints", str(d / "out.csv")]
@@ -53,7 +62,12 @@ def main() -> int:
                 t = time.perf_counter()
                 run(*reg)
                 ours.append(time.perf_counter() - t)
-            src = o3d.io.read_point_cloud(str(d / "template.ply"))
+            src = o3d.io.read_point_cloud(str(d / "t.ply"))
+            if args.spacing:
+                # Back from the CT's world to the phantom's frame (ribreg_sim::phantom::ct::
+                # WORLD_SHIFT_MM), where ICP's identity start is the phantom's pose; ribreg
+                # needs no start.
+                src.translate([-18.0, 412.0, -75.0])
             tgt = o3d.io.read_point_cloud(str(d / "target.ply"))
             theirs = []
             for _ in range(args.repeats):
