@@ -363,7 +363,11 @@ mod tests {
                 .collect();
             order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
             let mut expect = have;
-            for (_, i) in order.iter().filter(|(_, i)| have & (1 << i) == 0).take(extra) {
+            for (_, i) in order
+                .iter()
+                .filter(|(_, i)| have & (1 << i) == 0)
+                .take(extra)
+            {
                 expect |= 1 << i;
             }
             assert_eq!(nearest_set(&points, &p, extra, have), expect, "case {case}");
