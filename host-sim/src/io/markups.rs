@@ -5,7 +5,7 @@ use serde_json::{json, Value};
 
 use super::csv::split_record;
 use super::Waypoints;
-use super::{content_lines, excerpt, parse_coordinate, FormatError, IoError, Location, Space};
+use super::{content_lines, excerpt, FormatError, IoError, Location, Space};
 
 /// The schema a written Markups JSON file names.
 const SCHEMA: &str = "https://raw.githubusercontent.com/slicer/slicer/master/Modules/\
@@ -199,18 +199,9 @@ pub fn parse_fcsv(text: &str) -> Result<Waypoints, IoError> {
             }));
         }
         let (xyz, label) = layout;
-        let mut p = [0.0; 3];
-        for (c, &i) in p.iter_mut().zip(&xyz) {
-            *c = parse_coordinate(&fields[i]).map_err(at)?;
-        }
-        out.points.push(space.to_patient(p));
-        out.labels
-            .push(label.map(|i| fields[i].clone()).unwrap_or_default());
+        super::waypoints::push_row(&mut out, &fields, xyz, label, space).map_err(at)?;
     }
-    if out.points.is_empty() {
-        return Err(FormatError::NoWaypoints.into());
-    }
-    Ok(out)
+    super::waypoints::nonempty(out)
 }
 
 /// Indices of x, y, z and the optional label among fcsv `columns`.

@@ -228,14 +228,35 @@ pub fn parse_waypoints_csv(text: &str) -> Result<Waypoints, IoError> {
                 continue;
             }
         }
-        let mut p = [0.0; 3];
-        for (c, &i) in p.iter_mut().zip(&columns) {
-            *c = parse_coordinate(&fields[i]).map_err(at(n))?;
-        }
-        out.points.push(space.to_patient(p));
-        out.labels
-            .push(label.map(|i| fields[i].clone()).unwrap_or_default());
+        push_row(&mut out, &fields, columns, label, space).map_err(at(n))?;
     }
+    nonempty(out)
+}
+
+/// The waypoint of one table row (`xyz` and `label` its columns, in `space`) onto `out`
+/// (the CSV and `.fcsv` readers' shared step).
+pub(super) fn push_row(
+    out: &mut Waypoints,
+    fields: &[String],
+    xyz: [usize; 3],
+    label: Option<usize>,
+    space: Space,
+) -> Result<(), FormatError> {
+    let mut p = [0.0; 3];
+    for (c, &i) in p.iter_mut().zip(&xyz) {
+        *c = parse_coordinate(fields.get(i).map_or("", String::as_str))?;
+    }
+    out.points.push(space.to_patient(p));
+    out.labels.push(
+        label
+            .and_then(|i| fields.get(i).cloned())
+            .unwrap_or_default(),
+    );
+    Ok(())
+}
+
+/// `out`, or [`FormatError::NoWaypoints`] when it holds none.
+pub(super) fn nonempty(out: Waypoints) -> Result<Waypoints, IoError> {
     if out.points.is_empty() {
         return Err(FormatError::NoWaypoints.into());
     }
