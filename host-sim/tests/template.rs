@@ -147,6 +147,21 @@ fn a_prepared_template_registers_bit_for_bit_like_its_cloud() {
         let b = std::fs::read(d.join(format!("prepared{f}"))).unwrap();
         assert!(a == b, "{f} differs");
     }
+    // An output that is an input or the other output is refused before anything is read.
+    for (out, prepared) in [("template.ply", "p2.ply"), ("t2.ply", "t2.ply")] {
+        let o = ribreg(&[
+            "template",
+            "--cloud",
+            s(&d.join("template.ply")),
+            "--out",
+            s(&d.join(out)),
+            "--prepared",
+            s(&d.join(prepared)),
+        ]);
+        assert_eq!(o.status.code(), Some(2));
+        assert!(String::from_utf8_lossy(&o.stderr).contains("used twice"));
+    }
+    assert!(!d.join("p2.ply").exists() && !d.join("t2.ply").exists());
     // The paper's method cannot take a prepared template.
     let o = ribreg(&[
         "register",

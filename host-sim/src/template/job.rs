@@ -99,6 +99,28 @@ pub fn run(job: &TemplateJob, progress: &mut dyn FnMut(&str)) -> Result<Template
             job.spacing
         )));
     }
+    let inputs: Vec<&Path> = job
+        .labelmap
+        .iter()
+        .chain(&job.cloud)
+        .map(PathBuf::as_path)
+        .chain(
+            job.parts
+                .iter()
+                .filter_map(|p| p.split_once('=').map(|(_, f)| Path::new(f))),
+        )
+        .collect();
+    let outputs: Vec<&Path> = std::iter::once(job.out.as_path())
+        .chain(job.prepared.as_deref())
+        .collect();
+    for (i, o) in outputs.iter().enumerate() {
+        if outputs[..i].contains(o) || inputs.contains(o) {
+            return Err(CliError::Usage(format!(
+                "{}: used twice (inputs and outputs must differ)",
+                o.display()
+            )));
+        }
+    }
     let t0 = Instant::now();
     let (cloud, source) = if let Some(path) = &job.labelmap {
         let volume = read_labelmap(path)?;
