@@ -796,6 +796,40 @@ pub(crate) fn write_atomic(
     result
 }
 
+/// Test support: the next value of a small deterministic generator (an LCG) for the
+/// readers' garbage tests.
+#[cfg(test)]
+pub(crate) fn lcg(state: &mut u64) -> usize {
+    *state = state
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
+    (*state >> 33) as usize
+}
+
+/// Test support: `count` mutants of `seed`, each with one to four edits (a byte
+/// overwritten, the data cut, or a byte of `alphabet` inserted), for the readers' "never
+/// panics" tests.
+#[cfg(test)]
+pub(crate) fn mutants(seed: &[u8], count: usize, alphabet: &[u8], state: &mut u64) -> Vec<Vec<u8>> {
+    (0..count)
+        .map(|_| {
+            let mut m = seed.to_vec();
+            for _ in 0..1 + lcg(state) % 4 {
+                if m.is_empty() {
+                    break;
+                }
+                let i = lcg(state) % m.len();
+                match lcg(state) % 3 {
+                    0 => m[i] = lcg(state) as u8,
+                    1 => m.truncate(i),
+                    _ => m.insert(i, alphabet[lcg(state) % alphabet.len()]),
+                }
+            }
+            m
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -122,12 +122,6 @@ fn stl_space_headers() {
 #[test]
 fn mutated_fixtures_never_panic() {
     let mut s: u64 = 14;
-    let mut next = move || {
-        s = s
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (s >> 33) as usize
-    };
     let names = [
         "slicer_lps.mrk.json",
         "slicer_lps.fcsv",
@@ -138,19 +132,7 @@ fn mutated_fixtures_never_panic() {
     ];
     for name in names {
         let seed = std::fs::read(dir().join(name)).unwrap();
-        for _ in 0..500 {
-            let mut m = seed.clone();
-            for _ in 0..1 + next() % 4 {
-                if m.is_empty() {
-                    break;
-                }
-                let i = next() % m.len();
-                match next() % 3 {
-                    0 => m[i] = next() as u8,
-                    1 => m.truncate(i),
-                    _ => m.insert(i, b"0123456789 \n-,\"#=[]{}:.e"[next() % 24]),
-                }
-            }
+        for m in crate::io::mutants(&seed, 500, b"0123456789 \n-,\"#=[]{}:.e", &mut s) {
             let _ = super::pcd::parse_pcd(&m);
             let _ = super::mesh::tests_declared_space(&m);
             if let Ok(text) = std::str::from_utf8(&m) {

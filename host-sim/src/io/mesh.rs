@@ -741,31 +741,13 @@ mod tests {
     #[test]
     fn garbage_never_panics() {
         let mut s: u64 = 11;
-        let mut next = move || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 33) as usize
-        };
         let seeds = [
             OBJ.as_bytes().to_vec(),
             ASCII_STL.as_bytes().to_vec(),
             binary_stl(b"solid", &SQUARE),
         ];
         for seed in &seeds {
-            for _ in 0..2000 {
-                let mut m = seed.clone();
-                for _ in 0..1 + next() % 4 {
-                    if m.is_empty() {
-                        break;
-                    }
-                    let i = next() % m.len();
-                    match next() % 3 {
-                        0 => m[i] = next() as u8,
-                        1 => m.truncate(i),
-                        _ => m.insert(i, b"0123456789 \n-/f#v"[next() % 17]),
-                    }
-                }
+            for m in crate::io::mutants(seed, 2000, b"0123456789 \n-/f#v", &mut s) {
                 let _ = parse_stl(&m);
                 if let Ok(text) = std::str::from_utf8(&m) {
                     let _ = parse_obj(text);

@@ -734,31 +734,13 @@ mod tests {
     #[test]
     fn garbage_never_panics() {
         let mut s: u64 = 7;
-        let mut next = move || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 33) as usize
-        };
         let seeds = [
             ASCII.as_bytes().to_vec(),
             binary(&POINTS, "binary"),
             binary(&POINTS, "binary_compressed"),
         ];
         for seed in &seeds {
-            for _ in 0..3000 {
-                let mut m = seed.clone();
-                for _ in 0..1 + next() % 4 {
-                    if m.is_empty() {
-                        break;
-                    }
-                    let i = next() % m.len();
-                    match next() % 3 {
-                        0 => m[i] = next() as u8,
-                        1 => m.truncate(i),
-                        _ => m.insert(i, b"0123456789 \n-FIU"[next() % 16]),
-                    }
-                }
+            for m in crate::io::mutants(seed, 3000, b"0123456789 \n-FIU", &mut s) {
                 let _ = parse_pcd(&m);
             }
         }

@@ -723,6 +723,12 @@ impl PlyElement {
     }
 }
 
+/// Whether the PLY header of `bytes` declares an element called `name` (the body is
+/// not read). `false` for anything that is not a PLY header.
+pub(super) fn declares_element(bytes: &[u8], name: &str) -> bool {
+    parse_header(bytes).is_ok_and(|h| h.element(name).is_some())
+}
+
 /// Decode every element of a PLY file (any element names), for files that carry more
 /// than a cloud or a mesh (ribreg's prepared templates). List properties are checked and
 /// skipped. Non-finite values are kept: the caller decides what a value means. Header
@@ -1489,19 +1495,11 @@ mod tests {
         );
     }
 
-    /// Tiny deterministic generator for the garbage tests.
-    fn lcg(state: &mut u64) -> u64 {
-        *state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        *state >> 33
-    }
-
     #[test]
     fn garbage_and_mutations_never_panic() {
         let mut s = 7;
         for len in 0..300 {
-            let bytes: Vec<u8> = (0..len).map(|_| lcg(&mut s) as u8).collect();
+            let bytes: Vec<u8> = (0..len).map(|_| crate::io::lcg(&mut s) as u8).collect();
             assert!(parse_ply(&bytes).is_err());
             let mut with_magic = b"ply\nformat binary_little_endian 1.0\n".to_vec();
             with_magic.extend(&bytes);
@@ -1513,19 +1511,7 @@ mod tests {
             ascii(&format!("{XYZ_ASCII}1 2 3\n4 5 6\n7 8 9\n")),
         ];
         for seed in &seeds {
-            for _ in 0..3000 {
-                let mut m = seed.clone();
-                for _ in 0..1 + lcg(&mut s) % 4 {
-                    let i = lcg(&mut s) as usize % m.len();
-                    match lcg(&mut s) % 3 {
-                        0 => m[i] = lcg(&mut s) as u8,
-                        1 => m.truncate(i),
-                        _ => m.insert(i, b"0123456789 \n-e."[lcg(&mut s) as usize % 15]),
-                    }
-                    if m.is_empty() {
-                        break;
-                    }
-                }
+            for m in crate::io::mutants(seed, 3000, b"0123456789 \n-e.", &mut s) {
                 let _ = parse_ply(&m);
                 let _ = parse_ply_mesh(&m);
             }
