@@ -29,6 +29,15 @@ fn mean_error(a: &Path, b: &Path) -> f64 {
         / a.len() as f64
 }
 
+/// `ribreg phantom --seed SEED` into `dir` (with `--ct`: its CT as a segmentation too).
+fn phantom(dir: &Path, seed: &str, ct: bool) {
+    let mut args = vec!["-q", "phantom", "--seed", seed, "--out-dir", s(dir)];
+    if ct {
+        args.push("--ct");
+    }
+    stdout(&ribreg(&args));
+}
+
 fn register(dir: &Path, template: &Path, waypoints: &Path, tag: &str) -> f64 {
     let out_wp = dir.join(format!("{tag}_waypoints.csv"));
     stdout(&ribreg(&[
@@ -58,15 +67,7 @@ fn labelmap_and_parts_register_as_well_as_the_labelled_cloud() {
     let mut sums = [0.0f64; 3];
     let seeds = ["0", "1", "2", "3", "4", "5"];
     for seed in seeds {
-        stdout(&ribreg(&[
-            "-q",
-            "phantom",
-            "--seed",
-            seed,
-            "--ct",
-            "--out-dir",
-            s(d),
-        ]));
+        phantom(d, seed, true);
         let reference = register(d, &d.join("template.ply"), &d.join("waypoints.csv"), "ply");
         let plan = d.join("ct/plan.mrk.json");
         let out = stdout(&ribreg(&[
@@ -121,14 +122,7 @@ fn labelmap_and_parts_register_as_well_as_the_labelled_cloud() {
 fn a_prepared_template_registers_bit_for_bit_like_its_cloud() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    stdout(&ribreg(&[
-        "-q",
-        "phantom",
-        "--seed",
-        "5",
-        "--out-dir",
-        s(d),
-    ]));
+    phantom(d, "5", false);
     stdout(&ribreg(&[
         "-q",
         "template",
@@ -281,14 +275,7 @@ fn an_off_by_one_rib_numbering_is_reported_and_overridden() {
 fn an_unlabelled_cloud_is_labelled_by_the_rule_or_refused() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    stdout(&ribreg(&[
-        "-q",
-        "phantom",
-        "--seed",
-        "2",
-        "--out-dir",
-        s(d),
-    ]));
+    phantom(d, "2", false);
     let truth = ribreg_sim::io::read_ply(&d.join("template.ply")).unwrap();
     // As Open3D would hand it over: an XYZ file, no labels.
     let xyz: String = truth

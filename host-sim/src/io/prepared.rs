@@ -129,10 +129,12 @@ fn columns<const N: usize>(e: &PlyElement, names: [&str; N]) -> Result<Vec<[f32;
 /// missing element, property or row, `NotFinite` for a non-finite value and `BadLabel`
 /// for a node label outside 0..=5.
 pub fn parse_template_file(bytes: &[u8]) -> Result<TemplateFile, IoError> {
-    let elements = parse_ply_elements(bytes)?;
-    let Some(marker) = elements.iter().find(|e| e.name == "ribreg_prepared") else {
+    // A plain cloud is decoded once, by the cloud reader alone.
+    if !super::ply::declares_element(bytes, "ribreg_prepared") {
         return parse_ply(bytes).map(TemplateFile::Cloud);
-    };
+    }
+    let elements = parse_ply_elements(bytes)?;
+    let marker = element(&elements, "ribreg_prepared", &["version"], Some(1))?;
     let version = marker
         .property("version")
         .and_then(|i| marker.rows.first().and_then(|r| r.get(i)))
