@@ -11,8 +11,8 @@
 
 use pyo3::prelude::*;
 
-mod link;
-mod registration;
+pub mod link;
+pub mod registration;
 
 #[pymodule]
 fn _ribreg(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -1,4 +1,34 @@
-"""ribreg: skeleton-graph US–CT rib-cartilage registration."""
-from ._ribreg import __version__
+"""ribreg: skeleton-graph US–CT rib-cartilage registration, from Python.
 
-__all__ = ["__version__"]
+The numpy API is the ``ribreg`` CLI's ``register`` with arrays::
+
+    import ribreg
+    template, labels = ribreg.read_cloud("template.ply")
+    target, _ = ribreg.read_cloud("target.ply")
+    reg = ribreg.register(template, target, labels)
+    mapped = reg.transform(waypoints)      # (N, 3) float64, mm
+    reg.report["metrics"]["ed_mean_mm"], reg.rigid  # report dict, 4 x 4 rigid part
+
+A template prepared once (``ribreg.Template``, or ``ribreg template --prepared``) is
+reused for every target. Bad input raises ``ValueError`` with the core's message; a file
+the system cannot read raises ``OSError``. The robot PC's side of the controller's wire
+protocol is ``ribreg.link``.
+"""
+
+from ._ribreg import (
+    Registration,
+    Template,
+    __version__,
+    read_cloud,
+    read_waypoints,
+    register,
+)
+
+__all__ = [
+    "Registration",
+    "Template",
+    "__version__",
+    "read_cloud",
+    "read_waypoints",
+    "register",
+]
