@@ -1,20 +1,22 @@
 """Type stubs of the ``ribreg._ribreg`` extension module (see ``host-sim/python/src``)."""
 
 from os import PathLike
-from typing import Any, Optional, Sequence, Union
+from typing import Any, Optional, Sequence, Union, final
 
 import numpy as np
 import numpy.typing as npt
 
 __version__: str
+__all__ = ["__version__", "Template", "Registration", "register", "read_cloud", "read_waypoints"]
 
 _Points = npt.ArrayLike  # (N, 3), any real dtype, any memory order
 _Path = Union[str, PathLike[str]]
 
+@final
 class Template:
     """A template prepared once and reused; the format of ``ribreg template --prepared``."""
 
-    def __init__(self, points: _Points, labels: npt.ArrayLike) -> None:
+    def __new__(cls, points: _Points, labels: npt.ArrayLike) -> "Template":
         """Prepares a template from a labelled cloud (1 = sternum, 2..5 = rib)."""
     @staticmethod
     def load(path: _Path) -> "Template":
@@ -32,6 +34,7 @@ class Template:
         """The 30 skeleton points, (30, 3), mm."""
     def __len__(self) -> int: ...
 
+@final
 class Registration:
     """The non-rigid mapping template -> target found by ``register``."""
 

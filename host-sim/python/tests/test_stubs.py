@@ -1,0 +1,12 @@
+"""The type stubs say what the extension module really has (mypy's stubtest compares
+every name, signature and class in the .pyi with the module at run time)."""
+
+import subprocess
+import sys
+
+
+def test_stubs_match_the_extension_module():
+    run = subprocess.run(
+        [sys.executable, "-m", "mypy.stubtest", "ribreg._ribreg"], capture_output=True, text=True
+    )
+    assert run.returncode == 0, run.stdout + run.stderr
