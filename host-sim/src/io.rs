@@ -42,7 +42,7 @@ pub use csv::{
     write_table_csv,
 };
 pub use markups::{parse_fcsv, parse_markups_json};
-pub use mesh::{read_mesh, read_mesh_in, write_mesh_obj, write_mesh_stl};
+pub use mesh::{mesh_space, parse_mesh, read_mesh, read_mesh_in, write_mesh_obj, write_mesh_stl};
 pub use pcd::{parse_pcd, read_pcd};
 pub use ply::{parse_ply, parse_ply_elements, read_ply, write_mesh_ply, write_ply, PlyElement};
 pub use space::Space;

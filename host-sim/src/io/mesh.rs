@@ -28,24 +28,40 @@ use super::{FormatError, IoError, Location, Mesh, PlyFormat, Space};
 /// [`parse_ply`](super::parse_ply) for PLY), a non-finite coordinate, a face index out of
 /// range, a face with fewer than three corners, no vertices or no triangles.
 pub fn read_mesh(path: &Path) -> Result<Mesh, IoError> {
-    let (_, parse) = parser(path)?;
-    parse(&read_bytes(path)?).map_err(|e| e.with_path(path))
+    let extension = extension_of(path);
+    check_extension(&extension).map_err(|e| e.with_path(path))?;
+    parse_mesh(&extension, &read_bytes(path)?).map_err(|e| e.with_path(path))
 }
 
-/// The lower-case extension of `path` and the parser for it.
-#[allow(clippy::type_complexity)]
-fn parser(path: &Path) -> Result<(String, fn(&[u8]) -> Result<Mesh, IoError>), IoError> {
-    let extension = path
-        .extension()
+/// The lower-case extension of `path` (empty if none).
+fn extension_of(path: &Path) -> String {
+    path.extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
-        .unwrap_or_default();
-    let parse: fn(&[u8]) -> Result<Mesh, IoError> = match extension.as_str() {
-        "ply" => parse_ply_mesh,
-        "obj" => |bytes| parse_obj(text(bytes, 1)?),
-        "stl" => parse_stl,
-        _ => return Err(IoError::from(FormatError::UnknownExtension(extension)).with_path(path)),
-    };
-    Ok((extension, parse))
+        .unwrap_or_default()
+}
+
+fn check_extension(extension: &str) -> Result<(), IoError> {
+    match extension {
+        "ply" | "obj" | "stl" => Ok(()),
+        _ => Err(IoError::from(FormatError::UnknownExtension(
+            extension.to_string(),
+        ))),
+    }
+}
+
+/// Parses the bytes of a mesh file whose (lower-case) extension is `extension` (`ply`,
+/// `obj` or `stl`), in the file's coordinates: what [`read_mesh`] does after reading
+/// the file, and the entry point for untrusted bytes (fuzzed in `tests/fuzz`).
+///
+/// # Errors
+/// Those of [`read_mesh`], without a path.
+pub fn parse_mesh(extension: &str, bytes: &[u8]) -> Result<Mesh, IoError> {
+    check_extension(extension)?;
+    match extension {
+        "ply" => parse_ply_mesh(bytes),
+        "obj" => parse_obj(text(bytes, 1)?),
+        _ => parse_stl(bytes),
+    }
 }
 
 /// Read a triangle mesh as [`read_mesh`] does and bring its vertices into ribreg's
@@ -69,10 +85,11 @@ fn parser(path: &Path) -> Result<(String, fn(&[u8]) -> Result<Mesh, IoError>), I
 /// Those of [`read_mesh`], and [`FormatError::UnknownSpace`] (with the path) for a
 /// `SPACE=` value other than RAS or LPS.
 pub fn read_mesh_in(path: &Path, default: Space) -> Result<(Mesh, Space), IoError> {
-    let (extension, parse) = parser(path)?;
+    let extension = extension_of(path);
+    check_extension(&extension).map_err(|e| e.with_path(path))?;
     let bytes = read_bytes(path)?;
-    let mut mesh = parse(&bytes).map_err(|e| e.with_path(path))?;
-    let space = declared_space(&extension, &bytes)
+    let mut mesh = parse_mesh(&extension, &bytes).map_err(|e| e.with_path(path))?;
+    let space = mesh_space(&extension, &bytes)
         .map_err(|kind| IoError::from(kind).with_path(path))?
         .unwrap_or(default);
     for v in &mut mesh.vertices {
@@ -81,8 +98,12 @@ pub fn read_mesh_in(path: &Path, default: Space) -> Result<(Mesh, Space), IoErro
     Ok((mesh, space))
 }
 
-/// The space a mesh file of this (parsed, so well-formed) kind declares, if any.
-fn declared_space(extension: &str, bytes: &[u8]) -> Result<Option<Space>, FormatError> {
+/// The space a mesh file of this (lower-case) extension declares (see [`read_mesh_in`]),
+/// if any; meant for bytes [`parse_mesh`] accepted.
+///
+/// # Errors
+/// [`FormatError::UnknownSpace`] for a `SPACE=` value other than RAS or LPS.
+pub fn mesh_space(extension: &str, bytes: &[u8]) -> Result<Option<Space>, FormatError> {
     let lines = || bytes.split(|&b| b == b'\n').map(<[u8]>::trim_ascii);
     match extension {
         "stl" => {
@@ -118,12 +139,12 @@ fn declared_space(extension: &str, bytes: &[u8]) -> Result<Option<Space>, Format
     }
 }
 
-/// [`declared_space`] of every kind, for the fixture tests' garbage runs.
+/// [`mesh_space`] of every kind, for the fixture tests' garbage runs.
 #[cfg(test)]
 pub(super) fn tests_declared_space(bytes: &[u8]) -> Vec<Result<Option<Space>, FormatError>> {
     ["stl", "ply", "obj"]
         .iter()
-        .map(|e| declared_space(e, bytes))
+        .map(|e| mesh_space(e, bytes))
         .collect()
 }
 
