@@ -52,6 +52,7 @@ pub struct VoxelStats {
 }
 
 /// A fixed-capacity voxel-grid down-sampling of a point stream (module docs).
+#[derive(Clone)]
 pub struct VoxelCloud<const CAP: usize> {
     /// Morton codes at the current level, ascending.
     codes: [u64; CAP],
@@ -337,6 +338,7 @@ pub struct FrameStats {
 /// thousand soft-float instructions on the Cortex-M4F, a whole frame's several hundred
 /// thousand, too much for one call of the controller's loop. [`Compounder::add_frame`]
 /// does both at once. Points leave the queue in order, so the cloud is the same.
+#[derive(Clone)]
 pub struct Compounder<const POSES: usize, const VOXELS: usize> {
     calibration: Calibration,
     ee_t_us: Rigid,

@@ -98,6 +98,7 @@ impl TrackedPose {
 }
 
 /// The last `N` tracked poses, in time order; when full, a new pose replaces the oldest.
+#[derive(Clone)]
 pub struct PoseTrack<const N: usize> {
     buf: [TrackedPose; N],
     /// Index of the oldest pose in `buf`.

@@ -250,6 +250,7 @@ pub enum GuidedStage {
 /// state lives here (about 13 KiB: the carried nodes, labels, three node trees, the
 /// mapping's transform cache), not on the stack. [`crate::registration::pipeline::register`] runs it to
 /// the end.
+#[derive(Clone)]
 pub struct TargetSkeleton {
     stage: GuidedStage,
     cursor: u32,

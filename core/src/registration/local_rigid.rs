@@ -32,6 +32,7 @@ use nalgebra::{Matrix3, SymmetricEigen};
 pub const MIN_CROSS_SPREAD: f32 = 0.15;
 
 /// Fixed-capacity map from neighbourhood bit set to its fitted transform.
+#[derive(Clone)]
 pub struct TransformCache<const CAP: usize> {
     /// Neighbourhood → (transform, widened neighbourhood).
     map: heapless::index_map::FnvIndexMap<u32, (Rigid, u32), CAP>,

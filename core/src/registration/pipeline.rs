@@ -184,6 +184,7 @@ pub fn register(template: &Template, target: &[Vec3], cfg: &Config) -> Result<Re
 /// graph model's endpoint matching and the mapping's set-up take one call each. The
 /// result equals [`register`]'s and is kept inside (nothing of kilobytes passes through
 /// the caller's stack).
+#[derive(Clone)]
 pub struct Registering {
     stage: Stage,
 }
@@ -191,6 +192,7 @@ pub struct Registering {
 // The stages are exclusive and live once per registration: boxing is not an option
 // without a heap, and the size is the largest stage's anyway.
 #[allow(clippy::large_enum_variant)]
+#[derive(Clone)]
 enum Stage {
     Graph(GraphBuild),
     Guided(SkeletonGraph, TargetSkeleton),

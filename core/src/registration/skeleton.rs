@@ -141,6 +141,7 @@ impl SkeletonGraph {
 
 /// A [`SkeletonGraph`] being built a bounded number of SOM iterations at a time (the
 /// controller's incremental registration); [`SkeletonGraph::build`] runs it to the end.
+#[derive(Clone)]
 pub struct GraphBuild {
     which: Cloud,
     patient_frame: bool,
@@ -150,6 +151,7 @@ pub struct GraphBuild {
 // The stages are exclusive and the enum lives once per registration: boxing is not an
 // option without a heap, and the size is the largest stage's anyway.
 #[allow(clippy::large_enum_variant)]
+#[derive(Clone)]
 enum GraphStage {
     Som1(Som<SOM1_CAPACITY>, SomTrainer, LiveScan<SOM1_CAPACITY>),
     Som2(

@@ -116,6 +116,7 @@ pub fn decode<'de, T: Deserialize<'de>>(frame: &'de mut [u8]) -> Result<(u16, T)
 
 /// Collects bytes from the link into frames: resynchronises on the zero delimiter and
 /// drops over-long frames.
+#[derive(Clone)]
 pub struct Receiver {
     buf: [u8; MAX_FRAME],
     len: usize,
