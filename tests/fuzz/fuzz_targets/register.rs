@@ -21,9 +21,25 @@ struct Input {
 
 fuzz_target!(|input: Input| {
     let s = f32::from(input.scale.max(1)) / 16.0;
-    let v = |p: &[i16; 3]| Vec3::new(f32::from(p[0]) * s, f32::from(p[1]) * s, f32::from(p[2]) * s);
-    let mut template: Vec<Vec3> = input.template.iter().take(3000).map(|(p, _)| v(p)).collect();
-    let labels: Vec<u8> = input.template.iter().take(3000).map(|(_, l)| l % 6).collect();
+    let v = |p: &[i16; 3]| {
+        Vec3::new(
+            f32::from(p[0]) * s,
+            f32::from(p[1]) * s,
+            f32::from(p[2]) * s,
+        )
+    };
+    let mut template: Vec<Vec3> = input
+        .template
+        .iter()
+        .take(3000)
+        .map(|(p, _)| v(p))
+        .collect();
+    let labels: Vec<u8> = input
+        .template
+        .iter()
+        .take(3000)
+        .map(|(_, l)| l % 6)
+        .collect();
     let mut target: Vec<Vec3> = input.target.iter().take(3000).map(v).collect();
     let waypoints: Vec<Vec3> = input.waypoints.iter().take(64).map(v).collect();
     for (i, p) in &input.raw {
@@ -39,8 +55,22 @@ fuzz_target!(|input: Input| {
             target[i - template.len()] = q;
         }
     }
-    let method = if input.paper { Method::Paper } else { Method::Improved };
-    if let Ok(out) = register_clouds(&template, Some(&labels), &target, Some(&waypoints), method, &mut |_| {}) {
-        assert!(out.registered.iter().all(|p| p.iter().all(|c| c.is_finite())));
+    let method = if input.paper {
+        Method::Paper
+    } else {
+        Method::Improved
+    };
+    if let Ok(out) = register_clouds(
+        &template,
+        Some(&labels),
+        &target,
+        Some(&waypoints),
+        method,
+        &mut |_| {},
+    ) {
+        assert!(out
+            .registered
+            .iter()
+            .all(|p| p.iter().all(|c| c.is_finite())));
     }
 });

@@ -15,6 +15,6 @@ fuzz_target!(|data: &[u8]| {
         volume::parse_nrrd(bytes)
     };
     if let Ok(v) = parsed {
-        assert_eq!(v.labels.len(), v.dims.iter().map(|&d| d as usize).product::<usize>());
+        assert_eq!(v.labels.len(), v.dims.iter().product::<usize>());
     }
 });

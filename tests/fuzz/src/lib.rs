@@ -180,7 +180,10 @@ impl Run {
         if !matches!(msg, ToController::Hello { .. }) {
             if seq != before.expected_seq {
                 assert_eq!(after.expected_seq, before.expected_seq, "{seq}: {msg:?}");
-                assert_eq!(after.poses, before.poses, "{seq}: a pose applied out of order");
+                assert_eq!(
+                    after.poses, before.poses,
+                    "{seq}: a pose applied out of order"
+                );
             } else {
                 assert!(
                     after.expected_seq == before.expected_seq.wrapping_add(1)
