@@ -189,6 +189,17 @@ impl LinkSession {
             .lock()
             .map_err(|_| LinkError::new_err("the session failed in another thread"))
     }
+
+    /// Runs `f` on the session without the GIL, the session locked inside: every use
+    /// of the session goes through here, so a thread waiting for the lock never holds
+    /// the GIL its holder needs to return.
+    fn detached<T: Send>(
+        &self,
+        py: Python<'_>,
+        f: impl FnOnce(&mut Session<AnyPort>) -> Result<T, CliError> + Send,
+    ) -> PyResult<T> {
+        py.detach(|| f(&mut *self.lock()?).map_err(link_error))
+    }
 }
 
 #[pymethods]
@@ -220,9 +231,7 @@ impl LinkSession {
     /// its sequence number.
     fn send(&self, py: Python<'_>, message: &Bound<'_, PyAny>) -> PyResult<u16> {
         let msg: ToController = from_py_msg(message)?;
-        let mut guard = self.lock()?;
-        let s = &mut *guard;
-        py.detach(|| s.send(&msg)).map_err(link_error)
+        self.detached(py, |s| s.send(&msg))
     }
 
     /// Reads what arrived (waiting at most `wait` s), handles ACKs and NACKs (re-sends
@@ -230,9 +239,7 @@ impl LinkSession {
     #[pyo3(signature = (wait = 0.0))]
     fn pump(&self, py: Python<'_>, wait: f64) -> PyResult<()> {
         let wait = Duration::from_secs_f64(wait.max(0.0));
-        let mut guard = self.lock()?;
-        let s = &mut *guard;
-        py.detach(|| s.pump(wait)).map_err(link_error)
+        self.detached(py, |s| s.pump(wait))
     }
 
     /// The next queued controller message (not an ACK/NACK), serde form, or `None`.
@@ -244,25 +251,25 @@ impl LinkSession {
         py: Python<'py>,
         timeout: Option<f64>,
     ) -> PyResult<Option<Bound<'py, PyAny>>> {
-        let mut guard = self.lock()?;
-        let s = &mut *guard;
         let msg = match timeout {
-            None => s.next_message(),
+            None => self.detached(py, |s| Ok(s.next_message()))?,
             Some(t) => {
+                // The session is locked for one pump at a time, so that other threads
+                // (one sending, say) get their turn while this one waits.
                 let deadline = Instant::now() + Duration::from_secs_f64(t.max(0.0));
-                py.detach(|| -> Result<Option<FromController>, CliError> {
-                    loop {
+                loop {
+                    let left = deadline.saturating_duration_since(Instant::now());
+                    let got = self.detached(py, |s| {
                         if let Some(m) = s.next_message() {
                             return Ok(Some(m));
                         }
-                        let left = deadline.saturating_duration_since(Instant::now());
                         s.pump(left.min(Duration::from_millis(10)))?;
-                        if left.is_zero() {
-                            return Ok(s.next_message());
-                        }
+                        Ok(s.next_message())
+                    })?;
+                    if got.is_some() || left.is_zero() {
+                        break got;
                     }
-                })
-                .map_err(link_error)?
+                }
             }
         };
         msg.map(|m| to_py_msg(py, &m)).transpose()
@@ -273,37 +280,35 @@ impl LinkSession {
     #[pyo3(signature = (timeout = 120.0))]
     fn flush(&self, py: Python<'_>, timeout: f64) -> PyResult<()> {
         let timeout = Duration::from_secs_f64(timeout.max(0.0));
-        let mut guard = self.lock()?;
-        let s = &mut *guard;
-        py.detach(|| s.flush(timeout)).map_err(link_error)
+        self.detached(py, |s| s.flush(timeout))
     }
 
     /// Lets `us` µs of controller time pass: the in-process controller is polled each
     /// millisecond of it; a real or emulated one runs on its own clock, so this sleeps.
     fn advance(&self, py: Python<'_>, us: u64) -> PyResult<()> {
-        let mut guard = self.lock()?;
-        let s = &mut *guard;
-        py.detach(|| s.port.advance(us));
-        Ok(())
+        self.detached(py, |s| {
+            s.port.advance(us);
+            Ok(())
+        })
     }
 
     /// Whether the controller's time passes only through `advance` (in-process).
     #[getter]
-    fn simulated_clock(&self) -> PyResult<bool> {
-        Ok(self.lock()?.port.simulated_clock())
+    fn simulated_clock(&self, py: Python<'_>) -> PyResult<bool> {
+        self.detached(py, |s| Ok(s.port.simulated_clock()))
     }
 
     /// Link counters: `sent`, `resent`, `nacks`, `timeouts`, `injected`, `bytes`.
     #[getter]
     fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        to_py_msg(py, &self.lock()?.link_stats())
+        let stats = self.detached(py, |s| Ok(s.link_stats()))?;
+        to_py_msg(py, &stats)
     }
 
     /// Application refusals so far: `(seq, code)` with the NACK code in serde form.
     #[getter]
     fn refused<'py>(&self, py: Python<'py>) -> PyResult<Vec<(u16, Bound<'py, PyAny>)>> {
-        self.lock()?
-            .refused
+        self.detached(py, |s| Ok(s.refused.clone()))?
             .iter()
             .map(|(seq, code)| Ok((*seq, to_py_msg(py, code)?)))
             .collect()

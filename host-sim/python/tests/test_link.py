@@ -210,3 +210,19 @@ def test_the_example_against_the_emulated_firmware(tmp_path):
     assert a[0] == a[2] and a[1] == a[3]
     assert max(w["error_mm"] for w in emulated["waypoints"]) <= TOLERANCE_MM
     assert emulated["cost"]["registration_calls"] > 0
+
+
+def test_a_session_shared_by_threads_does_not_deadlock():
+    import threading
+
+    s = Session.in_process()
+    s.handshake()
+    got = []
+    t = threading.Thread(target=lambda: got.append(s.next_message(timeout=5.0)))
+    t.start()
+    for _ in range(50):
+        s.pump(0.001)  # contends for the session while the thread waits in it
+    s.send(Command(CommandKind.STATUS))
+    t.join(10.0)
+    assert not t.is_alive()
+    assert got and got[0] is not None and got[0].expected_seq == 2

@@ -208,15 +208,22 @@ pub struct SimEmulator {
 }
 
 impl SimEmulator {
-    fn with<T>(&self, f: impl FnOnce(&mut emulator::Emulator) -> PyResult<T>) -> PyResult<T> {
-        let mut g = self
-            .emu
-            .lock()
-            .map_err(|_| LinkError::new_err("the emulator failed in another thread"))?;
-        match g.as_mut() {
-            Some(e) => f(e),
-            None => Err(LinkError::new_err("the emulator was closed")),
-        }
+    /// Runs `f` on the emulator without the GIL, locked inside (as `LinkSession`).
+    fn with<T: Send>(
+        &self,
+        py: Python<'_>,
+        f: impl FnOnce(&mut emulator::Emulator) -> PyResult<T> + Send,
+    ) -> PyResult<T> {
+        py.detach(|| {
+            let mut g = self
+                .emu
+                .lock()
+                .map_err(|_| LinkError::new_err("the emulator failed in another thread"))?;
+            match g.as_mut() {
+                Some(e) => f(e),
+                None => Err(LinkError::new_err("the emulator was closed")),
+            }
+        })
     }
 }
 
@@ -246,8 +253,8 @@ impl SimEmulator {
     }
 
     /// A session over the UART connection this emulator holds.
-    fn session(&self) -> PyResult<LinkSession> {
-        self.with(|e| {
+    fn session(&self, py: Python<'_>) -> PyResult<LinkSession> {
+        self.with(py, |e| {
             let stream = e
                 .serial()
                 .try_clone()
@@ -259,8 +266,8 @@ impl SimEmulator {
     /// Lets go of the UART connection so that another client (`Session.connect`,
     /// `robot_pc.py --port`) can connect to `127.0.0.1:{port}`: QEMU's server takes
     /// the next connection.
-    fn release_uart(&self) -> PyResult<()> {
-        self.with(|e| {
+    fn release_uart(&self, py: Python<'_>) -> PyResult<()> {
+        self.with(py, |e| {
             e.serial()
                 .shutdown(Shutdown::Both)
                 .map_err(|err| LinkError::new_err(format!("emulator serial port: {err}")))
@@ -271,30 +278,32 @@ impl SimEmulator {
     /// `timeout` s for QEMU to exit; returns its exit code (0: clean).
     #[pyo3(signature = (timeout = 30.0))]
     fn quit(&self, py: Python<'_>, timeout: f64) -> PyResult<Option<i32>> {
-        self.with(|e| {
+        self.with(py, |e| {
             e.serial()
                 .write_all(b"QUIT\0")
                 .map_err(|err| LinkError::new_err(format!("emulator serial port: {err}")))?;
-            py.detach(|| e.wait(Duration::from_secs_f64(timeout.max(0.0))))
+            e.wait(Duration::from_secs_f64(timeout.max(0.0)))
                 .map(|s| s.code())
                 .map_err(|err| link_error(err.into()))
         })
     }
 
     /// QEMU's stderr so far.
-    fn stderr_output(&self) -> PyResult<String> {
-        self.with(|e| Ok(e.stderr_output()))
+    fn stderr_output(&self, py: Python<'_>) -> PyResult<String> {
+        self.with(py, |e| Ok(e.stderr_output()))
     }
 
     /// Kills QEMU (if still running).
-    fn close(&self) -> PyResult<()> {
-        let mut g = self
-            .emu
-            .lock()
-            .map_err(|_| LinkError::new_err("the emulator failed in another thread"))?;
-        if let Some(mut e) = g.take() {
-            e.kill();
-        }
-        Ok(())
+    fn close(&self, py: Python<'_>) -> PyResult<()> {
+        py.detach(|| {
+            let mut g = self
+                .emu
+                .lock()
+                .map_err(|_| LinkError::new_err("the emulator failed in another thread"))?;
+            if let Some(mut e) = g.take() {
+                e.kill();
+            }
+            Ok(())
+        })
     }
 }
