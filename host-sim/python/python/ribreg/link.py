@@ -238,6 +238,7 @@ class Command(Message):
     kind: CommandKind  #: Which.
 
     def to_wire(self) -> Dict[str, Any]:
+        """``{"Command": "StartSweep"}`` and so on."""
         return {"Command": CommandKind(self.kind).value}
 
     @classmethod
@@ -276,6 +277,7 @@ class Nack(Message):
     detail: Optional[int] = None  #: The core error's code for ``NackCode.INVALID``.
 
     def to_wire(self) -> Dict[str, Any]:
+        """``{"Nack": {"seq": n, "code": "Corrupt"}}``, or ``{"Invalid": detail}`` as code."""
         code = NackCode(self.code)
         wire: Any = {code.value: self.detail} if code is NackCode.INVALID else code.value
         return {"Nack": {"seq": self.seq, "code": wire}}
@@ -336,6 +338,7 @@ class Fault(Message):
     detail: Optional[int] = None  #: The core error's code for ``FaultKind.REGISTRATION``.
 
     def to_wire(self) -> Dict[str, Any]:
+        """``{"Fault": "PoseTimeout"}`` or ``{"Fault": {"Registration": detail}}``."""
         kind = FaultKind(self.kind)
         wire: Any = {kind.value: self.detail} if kind is FaultKind.REGISTRATION else kind.value
         return {"Fault": wire}
