@@ -10,6 +10,7 @@ controller moved on, against the phantom's truth)::
     python robot_pc.py --in-process --quick --seed 0
     python robot_pc.py --port 127.0.0.1:4321 --quick     # the emulator's UART, a board
     python robot_pc.py --port /dev/ttyUSB0 --baud 115200
+    python robot_pc.py --in-process --quick --faults      # link faults injected
 
 ``--in-process`` runs the core's controller in this process on a simulated clock: the
 run is deterministic and equals ``ribreg hil --in-process`` with the same options bit
@@ -210,7 +211,8 @@ def print_report(r: Dict) -> None:
           f"(tolerance {TOLERANCE_MM} mm); lag {r['lag_ms']:.1f} ms; {r['points']} points "
           f"compounded; applied poses {a[0]}/{a[2]}, frames {a[1]}/{a[3]}; link: "
           f"{link['sent']} frames sent, {link['resent']} re-sent, {link['nacks']} NACKs, "
-          f"{link['timeouts']} timeouts; {r['wall_s']:.1f} s")
+          f"{link['timeouts']} timeouts, faults injected {link['injected']}; "
+          f"{r['wall_s']:.1f} s")
 
 
 def main(argv: Optional[List[str]] = None) -> int:
@@ -226,6 +228,10 @@ def main(argv: Optional[List[str]] = None) -> int:
                     help="pose of the US target")
     ap.add_argument("--quick", action="store_true",
                     help="the lighter sweep of ribreg hil --quick")
+    ap.add_argument("--faults", action="store_true",
+                    help="inject link faults (corrupted, dropped, duplicated, reordered "
+                         "frames, garbage), as ribreg hil --faults")
+    ap.add_argument("--fault-seed", type=int, default=1, help="seed of the fault injection")
     ap.add_argument("--json", help="also write the report as JSON here")
     ap.add_argument("--quiet", action="store_true", help="no progress on stderr")
     args = ap.parse_args(argv)
@@ -235,12 +241,13 @@ def main(argv: Optional[List[str]] = None) -> int:
             print(line, file=sys.stderr, flush=True)
 
     try:
+        faults = args.fault_seed if args.faults else None
         if args.in_process:
-            session = Session.in_process()
+            session = Session.in_process(faults)
         elif ":" not in args.port or args.port.startswith("COM"):
-            session = Session.serial(args.port, args.baud)
+            session = Session.serial(args.port, args.baud, faults)
         else:
-            session = Session.connect(args.port)
+            session = Session.connect(args.port, faults)
         scenario = Scenario(args.seed, quick=args.quick, variant=args.variant)
         report = run(session, scenario, progress)
     except LinkError as e:

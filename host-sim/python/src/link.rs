@@ -18,7 +18,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyList};
 use ribreg_core::wire::{self, FromController, ToController, MAX_FRAME};
 use ribreg_sim::error::CliError;
-use ribreg_sim::hil::{self, InProcess, Port, Session};
+use ribreg_sim::hil::{self, FaultInjector, Faults, InProcess, Port, Session};
 use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
@@ -184,6 +184,15 @@ impl LinkSession {
         }
     }
 
+    /// A session over `port`, through `ribreg hil --faults`' fault injector
+    /// ([`Faults::DEFAULT`]) seeded `fault_seed` if that is set.
+    fn over_faulty<P: Port + Send + 'static>(port: P, fault_seed: Option<u64>) -> Self {
+        match fault_seed {
+            Some(seed) => Self::over(Box::new(FaultInjector::new(port, Faults::DEFAULT, seed))),
+            None => Self::over(Box::new(port)),
+        }
+    }
+
     fn lock(&self) -> PyResult<MutexGuard<'_, Session<AnyPort>>> {
         self.inner
             .lock()
@@ -205,26 +214,29 @@ impl LinkSession {
 #[pymethods]
 impl LinkSession {
     /// A session with the core's controller in this process, on a simulated clock
-    /// that passes only through `advance`.
+    /// that passes only through `advance`. `fault_seed` (all constructors): inject
+    /// `ribreg hil --faults`' link faults with this seed.
     #[staticmethod]
-    fn in_process() -> Self {
-        Self::over(Box::new(InProcess::new()))
+    #[pyo3(signature = (fault_seed = None))]
+    fn in_process(fault_seed: Option<u64>) -> Self {
+        Self::over_faulty(InProcess::new(), fault_seed)
     }
 
     /// A session with a controller at `HOST:PORT` over TCP (the emulator's UART, a
     /// serial port exposed over the network).
     #[staticmethod]
-    fn connect(py: Python<'_>, addr: &str) -> PyResult<Self> {
+    #[pyo3(signature = (addr, fault_seed = None))]
+    fn connect(py: Python<'_>, addr: &str, fault_seed: Option<u64>) -> PyResult<Self> {
         let port = py.detach(|| hil::connect_tcp(addr)).map_err(link_error)?;
-        Ok(Self::over(Box::new(port)))
+        Ok(Self::over_faulty(port, fault_seed))
     }
 
     /// A session with a controller board on serial device `path` (8N1) at `baud`.
     #[staticmethod]
-    #[pyo3(signature = (path, baud = 115_200))]
-    fn serial(path: &str, baud: u32) -> PyResult<Self> {
+    #[pyo3(signature = (path, baud = 115_200, fault_seed = None))]
+    fn serial(path: &str, baud: u32, fault_seed: Option<u64>) -> PyResult<Self> {
         let port = hil::open_serial(path, baud).map_err(link_error)?;
-        Ok(Self::over(Box::new(port)))
+        Ok(Self::over_faulty(port, fault_seed))
     }
 
     /// Sends a robot PC message (serde form), waiting for room in the window; returns

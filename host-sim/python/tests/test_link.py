@@ -168,12 +168,13 @@ def f32(x: float) -> float:
     return struct.unpack("<f", struct.pack("<f", x))[0]
 
 
-def test_the_example_in_process_equals_ribreg_hil(tmp_path):
-    py = run_example(tmp_path, "--in-process")
+@pytest.mark.parametrize("faults", [[], ["--faults"]], ids=["clean", "faults"])
+def test_the_example_in_process_equals_ribreg_hil(tmp_path, faults):
+    py = run_example(tmp_path, "--in-process", *faults)
     ref_path = tmp_path / "hil.json"
     subprocess.run([str(ribreg_bin()), "hil", "--in-process", "--quick", "--seed",
-                    str(SEED), "--json", str(ref_path)], check=True, capture_output=True,
-                   timeout=600)
+                    str(SEED), *faults, "--json", str(ref_path)], check=True,
+                   capture_output=True, timeout=600)
     ref = json.loads(ref_path.read_text())
     assert len(py["waypoints"]) == len(ref["waypoints"]) == 10
     for a, b in zip(py["waypoints"], ref["waypoints"]):
@@ -185,10 +186,17 @@ def test_the_example_in_process_equals_ribreg_hil(tmp_path):
         assert a["truth"] == b["truth"]
         assert a["error_mm"] == b["error_mm"]
     assert py["applied"] == ref["applied"]
+    a = py["applied"]
+    assert a[0] == a[2] and a[1] == a[3]  # every pose and frame applied exactly once
     assert py["points"] == ref["points"]
     assert py["lag_ms"] == ref["lag_ms"]
-    assert py["link"]["sent"] == ref["link"]["sent"]
     assert py["refused"] == ref["refused"] == []
+    if faults:
+        assert py["link"]["nacks"] > 0 and py["link"]["resent"] > 0
+        assert min(py["link"]["injected"]) > 0
+    # The same seeded faults, the same re-sends (unless a silence timed out: wall time).
+    if py["link"]["timeouts"] == ref["link"]["timeouts"] == 0:
+        assert py["link"] == ref["link"]
     assert max(w["error_mm"] for w in py["waypoints"]) <= TOLERANCE_MM
 
 

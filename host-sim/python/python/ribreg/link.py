@@ -458,7 +458,7 @@ class LinkStats:
     resent: int  #: Frames re-sent.
     nacks: int  #: Transport NACKs received.
     timeouts: int  #: Silences that re-sent the window.
-    injected: List[int]  #: Faults injected (none by this module's sessions).
+    injected: List[int]  #: Faults injected: corrupted, dropped, duplicated, reordered, garbage.
     bytes: int  #: Bytes written.
 
 
@@ -476,22 +476,28 @@ class Session:
         self._s = inner
 
     @classmethod
-    def in_process(cls) -> "Session":
+    def in_process(cls, fault_seed: Optional[int] = None) -> "Session":
         """A session with the core's controller compiled into this process, on a
-        simulated clock that passes only through :meth:`advance`."""
-        return cls(_rs.LinkSession.in_process())
+        simulated clock that passes only through :meth:`advance`.
+
+        ``fault_seed`` (every constructor): inject the link faults of ``ribreg hil
+        --faults`` with this seed — 2 % each of corrupted, dropped, duplicated and
+        reordered frames and garbage bursts, between the session and the controller —
+        to exercise the re-sends; :attr:`LinkStats.injected` counts them."""
+        return cls(_rs.LinkSession.in_process(fault_seed))
 
     @classmethod
-    def connect(cls, addr: str) -> "Session":
+    def connect(cls, addr: str, fault_seed: Optional[int] = None) -> "Session":
         """A session with a controller at ``HOST:PORT`` over TCP (the emulator's UART,
         a serial port exposed over the network). :class:`LinkError` if it cannot."""
-        return cls(_rs.LinkSession.connect(addr))
+        return cls(_rs.LinkSession.connect(addr, fault_seed))
 
     @classmethod
-    def serial(cls, path: str, baud: int = 115_200) -> "Session":
+    def serial(cls, path: str, baud: int = 115_200,
+               fault_seed: Optional[int] = None) -> "Session":
         """A session with a controller board on serial device ``path`` (8N1).
         :class:`LinkError` if it cannot be opened."""
-        return cls(_rs.LinkSession.serial(path, baud))
+        return cls(_rs.LinkSession.serial(path, baud, fault_seed))
 
     def handshake(self, timeout: float = 120.0) -> HelloAck:
         """Sends :class:`Hello` (it must be the session's first message), waits until
