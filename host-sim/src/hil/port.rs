@@ -213,3 +213,27 @@ pub fn connect_tcp(addr: &str) -> Result<Stream<std::net::TcpStream>, CliError> 
     let _ = stream.set_nodelay(true);
     Ok(Stream::new(stream))
 }
+
+/// A boxed port is a port: a session can hold whichever transport is chosen at run time
+/// (`Session<Box<dyn Port + Send>>`, as the Python bindings do).
+impl<P: Port + ?Sized> Port for Box<P> {
+    fn write_all(&mut self, bytes: &[u8]) -> Result<(), CliError> {
+        (**self).write_all(bytes)
+    }
+
+    fn read_into(&mut self, out: &mut Vec<u8>, wait: Duration) -> Result<(), CliError> {
+        (**self).read_into(out, wait)
+    }
+
+    fn advance(&mut self, us: u64) {
+        (**self).advance(us);
+    }
+
+    fn simulated_clock(&self) -> bool {
+        (**self).simulated_clock()
+    }
+
+    fn fault_stats(&self) -> Option<FaultStats> {
+        (**self).fault_stats()
+    }
+}

@@ -127,6 +127,96 @@ impl RunOptions {
     }
 }
 
+/// What the robot PC prepares before a procedure: the simulated sweep, the lag its
+/// temporal calibration measured, and the upload that follows the handshake.
+pub struct Prepared {
+    /// The simulated sweep and its phantom (truth waypoints in `logs.pair`).
+    pub logs: sweep::SweepLogs,
+    /// Video lag behind the tracker, s.
+    pub lag_s: f64,
+    /// In upload order: the configuration, the template's node chunks, its shape and
+    /// the planned waypoints' chunks.
+    pub upload: Vec<ToController>,
+    /// Template nodes uploaded.
+    pub nodes: usize,
+    /// Waypoints uploaded.
+    pub waypoints: usize,
+}
+
+/// Simulates the sweep `sweep_cfg` of `phantom`, calibrates its lag and builds the
+/// upload [`run_with`] sends after the handshake (the improved method's template).
+pub fn prepare(phantom: &PhantomConfig, sweep_cfg: &SweepConfig) -> Result<Prepared, CliError> {
+    let logs = sweep::simulate(phantom, sweep_cfg)?;
+    let pair = &logs.pair;
+    let (tr, vi) = sweep::calibration_samples(&logs.calib_tracker, &logs.calib_video);
+    let lag = ribreg_core::acquisition::temporal::calibrate(&tr, &vi)?;
+
+    // Template: compact parts of the improved method's template.
+    let labels: Vec<u8> = pair.template.labels.iter().map(|&l| l as u8).collect();
+    let ct = to_core(&pair.template.points, ribreg_core::error::Cloud::Template)?;
+    let tpl = build_template(&ct, Some(&labels), Method::Improved, &mut |_| {})?;
+    let cal = logs.calibration;
+
+    let mut upload = vec![ToController::Configure(Configure {
+        probe: cal.probe,
+        tcp_t_us: rigid12(&cal.tcp_t_us),
+        ee_t_tcp: rigid12(&cal.ee_t_tcp),
+        lag_us: (lag.lag_s * 1e6).round() as i32,
+        voxel_mm: CONTROLLER_VOXEL_MM,
+        max_speed_mm_s: MAX_SPEED_MM_S,
+        max_accel_mm_s2: MAX_ACCEL_MM_S2,
+        standoff_mm: STANDOFF_MM,
+    })];
+    let nodes: Vec<Node> = tpl
+        .graph
+        .som1
+        .iter()
+        .zip(&tpl.node_labels)
+        .map(|(p, l)| Node {
+            p: (*p).into(),
+            label: *l,
+        })
+        .collect();
+    for (k, chunk) in nodes.chunks(NODES_PER_CHUNK).enumerate() {
+        upload.push(ToController::TemplateNodes {
+            offset: (k * NODES_PER_CHUNK) as u16,
+            total: nodes.len() as u16,
+            nodes: chunk.iter().copied().collect(),
+        });
+    }
+    let f = tpl.graph.frame;
+    let mut skeleton = [[0.0f32; 3]; 30];
+    for (o, p) in skeleton.iter_mut().zip(&tpl.skeleton.points) {
+        *o = (*p).into();
+    }
+    upload.push(ToController::TemplateShape(TemplateShape {
+        origin: f.origin.into(),
+        axes: std::array::from_fn(|i| f.axes[(i / 3, i % 3)]),
+        spread: f.spread.into(),
+        skeleton,
+        midline_fraction: tpl.midline_fraction,
+    }));
+    let wps: Vec<[f32; 3]> = pair
+        .template_waypoints
+        .iter()
+        .map(|p| p.map(|v| v as f32))
+        .collect();
+    for (k, chunk) in wps.chunks(WAYPOINTS_PER_CHUNK).enumerate() {
+        upload.push(ToController::Waypoints {
+            offset: (k * WAYPOINTS_PER_CHUNK) as u8,
+            total: wps.len() as u8,
+            points: chunk.iter().copied().collect(),
+        });
+    }
+    Ok(Prepared {
+        lag_s: lag.lag_s,
+        upload,
+        nodes: nodes.len(),
+        waypoints: wps.len(),
+        logs,
+    })
+}
+
 /// Runs the whole procedure on phantom `phantom` through `session`.
 pub fn run<P: Port>(
     session: &mut Session<P>,
@@ -144,19 +234,19 @@ pub fn run_with<P: Port>(
     progress: &mut dyn FnMut(&str),
 ) -> Result<HilReport, CliError> {
     let t0 = Instant::now();
-    let logs = sweep::simulate(phantom, &options.sweep)?;
-    let pair = &logs.pair;
-    let (tr, vi) = sweep::calibration_samples(&logs.calib_tracker, &logs.calib_video);
-    let lag = ribreg_core::acquisition::temporal::calibrate(&tr, &vi)?;
+    let prepared = prepare(phantom, &options.sweep)?;
     progress(&format!(
         "temporal calibration: lag {:.1} ms",
-        lag.lag_s * 1e3
+        prepared.lag_s * 1e3
     ));
-
-    // Template: compact parts of the improved method's template.
-    let labels: Vec<u8> = pair.template.labels.iter().map(|&l| l as u8).collect();
-    let ct = to_core(&pair.template.points, ribreg_core::error::Cloud::Template)?;
-    let tpl = build_template(&ct, Some(&labels), Method::Improved, &mut |_| {})?;
+    let Prepared {
+        logs,
+        lag_s,
+        upload,
+        nodes,
+        waypoints: n_waypoints,
+    } = prepared;
+    let pair = &logs.pair;
     let cal = logs.calibration;
 
     let timeout = Duration::from_secs(120);
@@ -165,62 +255,12 @@ pub fn run_with<P: Port>(
         version: VERSION,
     })?;
     session.flush(timeout)?;
-    session.send(&ToController::Configure(Configure {
-        probe: cal.probe,
-        tcp_t_us: rigid12(&cal.tcp_t_us),
-        ee_t_tcp: rigid12(&cal.ee_t_tcp),
-        lag_us: (lag.lag_s * 1e6).round() as i32,
-        voxel_mm: CONTROLLER_VOXEL_MM,
-        max_speed_mm_s: MAX_SPEED_MM_S,
-        max_accel_mm_s2: MAX_ACCEL_MM_S2,
-        standoff_mm: STANDOFF_MM,
-    }))?;
-    let nodes: Vec<Node> = tpl
-        .graph
-        .som1
-        .iter()
-        .zip(&tpl.node_labels)
-        .map(|(p, l)| Node {
-            p: (*p).into(),
-            label: *l,
-        })
-        .collect();
-    for (k, chunk) in nodes.chunks(NODES_PER_CHUNK).enumerate() {
-        session.send(&ToController::TemplateNodes {
-            offset: (k * NODES_PER_CHUNK) as u16,
-            total: nodes.len() as u16,
-            nodes: chunk.iter().copied().collect(),
-        })?;
-    }
-    let f = tpl.graph.frame;
-    let mut skeleton = [[0.0f32; 3]; 30];
-    for (o, p) in skeleton.iter_mut().zip(&tpl.skeleton.points) {
-        *o = (*p).into();
-    }
-    session.send(&ToController::TemplateShape(TemplateShape {
-        origin: f.origin.into(),
-        axes: std::array::from_fn(|i| f.axes[(i / 3, i % 3)]),
-        spread: f.spread.into(),
-        skeleton,
-        midline_fraction: tpl.midline_fraction,
-    }))?;
-    let wps: Vec<[f32; 3]> = pair
-        .template_waypoints
-        .iter()
-        .map(|p| p.map(|v| v as f32))
-        .collect();
-    for (k, chunk) in wps.chunks(WAYPOINTS_PER_CHUNK).enumerate() {
-        session.send(&ToController::Waypoints {
-            offset: (k * WAYPOINTS_PER_CHUNK) as u8,
-            total: wps.len() as u8,
-            points: chunk.iter().copied().collect(),
-        })?;
+    for m in &upload {
+        session.send(m)?;
     }
     session.flush(timeout)?;
     progress(&format!(
-        "template uploaded: {} nodes, {} waypoints",
-        nodes.len(),
-        wps.len()
+        "template uploaded: {nodes} nodes, {n_waypoints} waypoints"
     ));
 
     // Sweep.
@@ -264,7 +304,7 @@ pub fn run_with<P: Port>(
     session.send(&ToController::Command(Command::Register))?;
     let mut mapped: Vec<WaypointW> = Vec::new();
     let reg_start = Instant::now();
-    while mapped.len() < wps.len() {
+    while mapped.len() < n_waypoints {
         if reg_start.elapsed() > timeout {
             return Err(CliError::Link("registration did not finish in time".into()));
         }
@@ -289,7 +329,7 @@ pub fn run_with<P: Port>(
     session.send(&ToController::Command(Command::Execute))?;
     robot.start_executing();
     let mut current: Option<u8> = None;
-    let mut reached: Vec<Option<Rigid>> = vec![None; wps.len()];
+    let mut reached: Vec<Option<Rigid>> = vec![None; n_waypoints];
     let exec_start = Instant::now();
     let mut last_report = Instant::now();
     let mut done = false;
@@ -426,7 +466,7 @@ pub fn run_with<P: Port>(
             .iter()
             .map(|(s, c)| format!("{s}: {c:?}"))
             .collect(),
-        lag_ms: lag.lag_s * 1e3,
+        lag_ms: lag_s * 1e3,
         points: status.points,
         wall_s: t0.elapsed().as_secs_f64(),
         pose_timeouts,
@@ -563,6 +603,19 @@ impl Emulated {
     }
 }
 
+/// How [`run_emulated`] runs QEMU: `-icount shift=0,sleep=on`, QEMU's stdout (the
+/// defmt log) also written to `defmt_log` if set.
+pub fn emulator_options(defmt_log: Option<PathBuf>) -> emulator::Options {
+    emulator::Options {
+        icount: Some(emulator::Icount {
+            shift: 0,
+            sleep: true,
+        }),
+        semihosting_log: defmt_log,
+        ..emulator::Options::default()
+    }
+}
+
 /// The procedure against the firmware under QEMU (`-icount shift=0,sleep=on`: SysTick
 /// counts instructions while the firmware works), ended by `QUIT`, then the same
 /// in-process for comparison. `faults`: probabilities and seed of link faults.
@@ -576,15 +629,7 @@ pub fn run_emulated(
     progress("building the firmware");
     let elf = emulator::firmware_elf()?;
     let stack_size_bytes = emulator::stack_size_bytes(&elf)?;
-    let opts = emulator::Options {
-        icount: Some(emulator::Icount {
-            shift: 0,
-            sleep: true,
-        }),
-        semihosting_log: defmt_log,
-        ..emulator::Options::default()
-    };
-    let mut emu = emulator::Emulator::start(&elf, &opts)?;
+    let mut emu = emulator::Emulator::start(&elf, &emulator_options(defmt_log))?;
     progress(&format!("emulator up ({})", emu.args().join(" ")));
     let stream = emu.serial().try_clone().map_err(|source| QemuError::Io {
         context: "emulator serial port".into(),
