@@ -4,10 +4,11 @@
 //!
 //! * [`registration`]: `register`, `Template`, `Registration`, `read_cloud`,
 //!   `read_waypoints` — numpy arrays in and out, the CLI's readers and results.
-//! * `link`: the robot PC's side of the wire protocol (`ribreg.link`).
+//! * [`link`]: the robot PC's side of the wire protocol (`ribreg.link`, `ribreg.sim`).
 //!
 //! Errors: bad input raises `ValueError` with the core's or the reader's message; a
-//! file that cannot be read raises `OSError`; a link failure raises `ribreg.LinkError`.
+//! file that cannot be read raises `OSError`; a link failure raises `ribreg.LinkError`
+//! (an `OSError`).
 
 use pyo3::prelude::*;
 

@@ -1,14 +1,14 @@
 //! `ribreg.link`: the robot PC's side of the wire protocol, as the `ribreg-sim` host
 //! implements it (`ribreg_sim::hil`), with no protocol code of its own.
 //!
-//! * [`encode_frame`], [`decode_frame`], [`FrameReceiver`]: the core's framing
+//! * `encode_frame`, `decode_frame`, [`FrameReceiver`]: the core's framing
 //!   (`ribreg_core::wire`).
 //! * [`LinkSession`]: `ribreg_sim::hil::Session` (handshake as the first message,
 //!   sequence numbers, go-back-N re-sends, NACK handling) over the in-process
 //!   controller, a TCP `HOST:PORT` or a serial device.
-//! * [`sim`]: the simulated phantom, sweep, robot and emulator `ribreg hil` uses.
+//! * `sim`: the simulated phantom, sweep, robot and emulator `ribreg hil` uses.
 //!
-//! Messages cross as their serde form ([`convert`]); the typed classes are Python's
+//! Messages cross as their serde form (`convert`); the typed classes are Python's
 //! (`ribreg/link.py`). Errors: a frame that cannot be decoded raises `FrameError`
 //! (a `ValueError`), a bad message `ValueError`, a link failure `LinkError` (an
 //! `OSError`), each with the Rust message.

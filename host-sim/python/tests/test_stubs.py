@@ -10,3 +10,14 @@ def test_stubs_match_the_extension_module():
         [sys.executable, "-m", "mypy.stubtest", "ribreg._ribreg"], capture_output=True, text=True
     )
     assert run.returncode == 0, run.stdout + run.stderr
+
+
+def test_the_package_type_checks_strictly():
+    """The Python modules' own annotations hold (`mypy --strict` over the package, with
+    the extension's stubs)."""
+    run = subprocess.run(
+        [sys.executable, "-m", "mypy", "--strict", "-p", "ribreg"],
+        capture_output=True,
+        text=True,
+    )
+    assert run.returncode == 0, run.stdout + run.stderr

@@ -12,10 +12,12 @@ The numpy API is the ``ribreg`` CLI's ``register`` with arrays::
 A template prepared once (``ribreg.Template``, or ``ribreg template --prepared``) is
 reused for every target. Bad input raises ``ValueError`` with the core's message; a file
 the system cannot read raises ``OSError``. The robot PC's side of the controller's wire
-protocol is ``ribreg.link``.
+protocol is ``ribreg.link`` (its failures raise ``ribreg.LinkError``, an ``OSError``); the
+simulated robot, phantom and emulator of ``ribreg hil`` are ``ribreg.sim``.
 """
 
 from ._ribreg import (
+    LinkError,
     Registration,
     Template,
     __version__,
@@ -25,6 +27,7 @@ from ._ribreg import (
 )
 
 __all__ = [
+    "LinkError",
     "Registration",
     "Template",
     "__version__",

@@ -393,7 +393,7 @@ def _unit_or_newtype(v: Any) -> Tuple[str, Optional[int]]:
     return v, None
 
 
-def from_wire(wire: Dict[str, Any], to_controller: bool = False) -> Message:
+def from_wire(wire: Union[Dict[str, Any], str], to_controller: bool = False) -> Message:
     """The typed message of a serde form (``{"VariantName": body}``)."""
     if isinstance(wire, str):  # a variant without data
         wire = {wire: None}
