@@ -15,13 +15,7 @@ use ribreg_sim::phantom::PhantomConfig;
 const PATIENTS: u64 = 10;
 
 fn mixes() -> Vec<(&'static str, Faults)> {
-    let none = Faults {
-        corrupt: 0.0,
-        drop: 0.0,
-        duplicate: 0.0,
-        reorder: 0.0,
-        garbage: 0.0,
-    };
+    let none = Faults::NONE;
     vec![
         ("2 % each", Faults::DEFAULT),
         (

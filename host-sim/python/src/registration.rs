@@ -77,7 +77,21 @@ fn to_array<'py>(py: Python<'py>, points: &[[f64; 3]]) -> Bound<'py, PyArray2<f6
     a.into_pyarray(py)
 }
 
-/// Template labels (array-like of integers, one per point) → core labels 0..=5.
+/// Labels (one per template point) → core labels 0..=5 (1 = sternum, 2..5 = rib).
+fn core_labels(labels: impl Iterator<Item = i64>) -> PyResult<Vec<u8>> {
+    labels
+        .enumerate()
+        .map(|(i, l)| {
+            u8::try_from(l).ok().filter(|l| *l <= 5).ok_or_else(|| {
+                PyValueError::new_err(format!(
+                    "labels[{i}] = {l} is not a rib number 2..5 (1 = sternum, 0 = unlabelled)"
+                ))
+            })
+        })
+        .collect()
+}
+
+/// Template labels (array-like of integers, one per point) → core labels.
 fn labels_of(
     labels: Option<PyArrayLike1<'_, i64, AllowTypeChange>>,
     points: usize,
@@ -92,17 +106,7 @@ fn labels_of(
             v.len()
         )));
     }
-    v.iter()
-        .enumerate()
-        .map(|(i, &l)| {
-            u8::try_from(l).ok().filter(|l| *l <= 5).ok_or_else(|| {
-                PyValueError::new_err(format!(
-                    "labels[{i}] = {l} is not a rib number 2..5 (1 = sternum, 0 = unlabelled)"
-                ))
-            })
-        })
-        .collect::<PyResult<Vec<u8>>>()
-        .map(Some)
+    core_labels(v.iter().copied()).map(Some)
 }
 
 fn method_of(name: &str) -> PyResult<Method> {
@@ -152,18 +156,7 @@ fn labels_of_cloud(cloud: &Cloud) -> PyResult<Option<Vec<u8>>> {
     cloud
         .labels
         .as_ref()
-        .map(|l| {
-            l.iter()
-                .enumerate()
-                .map(|(i, &l)| {
-                    u8::try_from(l).ok().filter(|l| *l <= 5).ok_or_else(|| {
-                        PyValueError::new_err(format!(
-                            "labels[{i}] = {l} is not a rib number 2..5 (1 = sternum, 0 = unlabelled)"
-                        ))
-                    })
-                })
-                .collect()
-        })
+        .map(|l| core_labels(l.iter().map(|&l| i64::from(l))))
         .transpose()
 }
 

@@ -33,6 +33,15 @@ pub struct Faults {
 }
 
 impl Faults {
+    /// No faults: the frames pass through.
+    pub const NONE: Faults = Faults {
+        corrupt: 0.0,
+        drop: 0.0,
+        duplicate: 0.0,
+        reorder: 0.0,
+        garbage: 0.0,
+    };
+
     /// 2 % of each.
     pub const DEFAULT: Faults = Faults {
         corrupt: 0.02,
@@ -167,14 +176,7 @@ mod tests {
 
     #[test]
     fn no_faults_pass_frames_through_and_a_seed_repeats_its_faults() {
-        let none = Faults {
-            corrupt: 0.0,
-            drop: 0.0,
-            duplicate: 0.0,
-            reorder: 0.0,
-            garbage: 0.0,
-        };
-        let mut clean = FaultInjector::new(Tap::default(), none, 7);
+        let mut clean = FaultInjector::new(Tap::default(), Faults::NONE, 7);
         clean.write_all(b"abc\0").unwrap();
         assert_eq!(clean.inner().0, vec![b"abc\0".to_vec()]);
         assert_eq!(clean.stats().injected, [0; 5]);

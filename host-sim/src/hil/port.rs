@@ -32,6 +32,7 @@ pub trait Port {
 }
 
 /// The controller in this process, clocked by the caller.
+#[derive(Clone)]
 pub struct InProcess {
     /// The controller (boxed: about 100 KiB).
     pub controller: Box<Controller<CONTROLLER_VOXELS>>,

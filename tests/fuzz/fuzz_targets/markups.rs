@@ -5,13 +5,10 @@ use libfuzzer_sys::fuzz_target;
 use ribreg_sim::io as markups;
 
 fuzz_target!(|data: &[u8]| {
-    let Some((&which, bytes)) = data.split_first() else {
+    let Some((which, text)) = ribreg_fuzz::tagged_text(data, 2) else {
         return;
     };
-    let Ok(text) = std::str::from_utf8(bytes) else {
-        return;
-    };
-    let parsed = if which % 2 == 0 {
+    let parsed = if which == 0 {
         markups::parse_markups_json(text)
     } else {
         markups::parse_fcsv(text)

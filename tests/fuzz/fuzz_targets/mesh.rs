@@ -5,10 +5,10 @@ use libfuzzer_sys::fuzz_target;
 use ribreg_sim::io;
 
 fuzz_target!(|data: &[u8]| {
-    let Some((&which, bytes)) = data.split_first() else {
+    let Some((which, bytes)) = ribreg_fuzz::tagged(data, 3) else {
         return;
     };
-    let ext = ["obj", "stl", "ply"][usize::from(which % 3)];
+    let ext = ["obj", "stl", "ply"][usize::from(which)];
     if let Ok(mesh) = io::parse_mesh(ext, bytes) {
         assert!(mesh.vertices.iter().flatten().all(|c| c.is_finite()));
         let n = mesh.vertices.len();

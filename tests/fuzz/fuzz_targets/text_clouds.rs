@@ -6,13 +6,10 @@ use libfuzzer_sys::fuzz_target;
 use ribreg_sim::io;
 
 fuzz_target!(|data: &[u8]| {
-    let Some((&which, bytes)) = data.split_first() else {
+    let Some((which, text)) = ribreg_fuzz::tagged_text(data, 4) else {
         return;
     };
-    let Ok(text) = std::str::from_utf8(bytes) else {
-        return;
-    };
-    match which % 4 {
+    match which {
         0 => {
             if let Ok(c) = io::parse_cloud_csv(text) {
                 assert!(c.points.iter().flatten().all(|v| v.is_finite()));

@@ -6,10 +6,10 @@ use libfuzzer_sys::fuzz_target;
 use ribreg_sim::io::volume;
 
 fuzz_target!(|data: &[u8]| {
-    let Some((&which, bytes)) = data.split_first() else {
+    let Some((which, bytes)) = ribreg_fuzz::tagged(data, 2) else {
         return;
     };
-    let parsed = if which % 2 == 0 {
+    let parsed = if which == 0 {
         volume::parse_nifti(bytes)
     } else {
         volume::parse_nrrd(bytes)

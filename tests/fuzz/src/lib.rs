@@ -8,8 +8,6 @@
 //! handshake, configuration, upload, sweep, registration, execution). The rest is a list
 //! of steps, each a tag byte and its operands ([`parse_ops`]).
 
-use ribreg_core::controller::Controller;
-use ribreg_core::limits::CONTROLLER_VOXELS;
 use ribreg_core::wire::{self, Command, FromController, ToController, MAX_FRAME};
 use ribreg_sim::error::CliError;
 use ribreg_sim::hil::{self, InProcess, Port, RunOptions, Session};
@@ -139,13 +137,14 @@ pub fn start(k: u8) -> Run {
     }
 }
 
-/// One controller run, with the link's invariants checked after every frame.
+/// One controller run (the in-process port `ribreg hil` uses), with the link's
+/// invariants checked after every frame.
 #[derive(Clone)]
 pub struct Run {
-    /// The controller under test (boxed: about 100 KiB).
-    pub controller: Box<Controller<CONTROLLER_VOXELS>>,
-    rx: wire::Receiver,
-    now_us: u64,
+    /// The controller under test behind its byte link.
+    pub port: InProcess,
+    /// Cuts the controller's replies into frames.
+    replies: wire::Receiver,
 }
 
 impl Default for Run {
@@ -158,9 +157,8 @@ impl Run {
     /// A fresh controller at time 0.
     pub fn new() -> Self {
         Run {
-            controller: Box::new(Controller::new()),
-            rx: wire::Receiver::new(),
-            now_us: 0,
+            port: InProcess::new(),
+            replies: wire::Receiver::new(),
         }
     }
 
@@ -173,9 +171,9 @@ impl Run {
         let Ok(n) = wire::encode(seq, msg, &mut buf) else {
             return Vec::new();
         };
-        let before = self.controller.status();
+        let before = self.port.controller.status();
         let replies = self.feed(&buf[..n]);
-        let after = self.controller.status();
+        let after = self.port.controller.status();
         assert!(!replies.is_empty(), "frame {seq} {msg:?} got no reply");
         if !matches!(msg, ToController::Hello { .. }) {
             if seq != before.expected_seq {
@@ -202,23 +200,23 @@ impl Run {
 
     /// Feeds raw bytes; returns the replies.
     pub fn feed(&mut self, bytes: &[u8]) -> Vec<(u16, FromController)> {
-        for &b in bytes {
-            if let Some(frame) = self.rx.push(b) {
-                self.controller.receive(frame, self.now_us);
-            }
-        }
+        // Note: the in-process port never fails.
+        self.port.write_all(bytes).expect("in-process write");
         self.drain()
     }
 
-    /// Takes the replies; each encodes within `MAX_FRAME` and decodes to itself.
+    /// Takes the replies; each is a frame that decodes.
     fn drain(&mut self) -> Vec<(u16, FromController)> {
+        let mut bytes = Vec::new();
+        self.port
+            .read_into(&mut bytes, Duration::ZERO)
+            .expect("in-process read");
         let mut out = Vec::new();
-        let mut buf = [0u8; MAX_FRAME];
-        while let Some((seq, msg)) = self.controller.next_reply() {
-            let n = wire::encode(seq, &msg, &mut buf).expect("a reply fits MAX_FRAME");
-            let back = wire::decode::<FromController>(&mut buf[..n - 1]).expect("a reply decodes");
-            assert_eq!(back, (seq, msg));
-            out.push((seq, msg));
+        for b in bytes {
+            if let Some(frame) = self.replies.push(b) {
+                let frame = frame.expect("a reply fits MAX_FRAME");
+                out.push(wire::decode::<FromController>(frame).expect("a reply decodes"));
+            }
         }
         out
     }
@@ -235,13 +233,9 @@ impl Run {
         }
     }
 
-    /// Time passes, polled every ms (as the in-process port and the firmware's loop do).
+    /// Time passes (the port polls the controller every ms).
     fn advance(&mut self, us: u64) {
-        let end = self.now_us + us;
-        while self.now_us < end {
-            self.now_us = (self.now_us + 1000).min(end);
-            self.controller.poll(self.now_us);
-        }
+        self.port.advance(us);
         self.drain();
     }
 
@@ -250,7 +244,7 @@ impl Run {
         match op {
             Op::Next(bytes) => {
                 if let Ok(msg) = postcard::from_bytes::<ToController>(bytes) {
-                    let seq = self.controller.status().expected_seq;
+                    let seq = self.port.controller.status().expected_seq;
                     self.send(seq, &msg);
                 }
             }
@@ -271,7 +265,21 @@ impl Run {
     /// The controller still answers: a Status command with the expected number is
     /// answered whatever came before.
     pub fn check_answers(&mut self) {
-        let expected = self.controller.status().expected_seq;
+        let expected = self.port.controller.status().expected_seq;
         self.send(expected, &ToController::Command(Command::Status));
     }
+}
+
+/// A multi-format target's input: the first byte picks one of `formats` readers, the
+/// rest is the file's bytes.
+pub fn tagged(data: &[u8], formats: u8) -> Option<(u8, &[u8])> {
+    let (&which, bytes) = data.split_first()?;
+    Some((which % formats, bytes))
+}
+
+/// [`tagged`] for text readers: `None` unless the rest is UTF-8 (the readers' own
+/// UTF-8 check is a one-liner in front of them).
+pub fn tagged_text(data: &[u8], formats: u8) -> Option<(u8, &str)> {
+    let (which, bytes) = tagged(data, formats)?;
+    Some((which, std::str::from_utf8(bytes).ok()?))
 }
