@@ -1,6 +1,9 @@
 //! `ribreg eval`: every method on N phantom pairs (aligned and misaligned), in parallel,
 //! with a progress line, written as a markdown + JSON table like the paper's Table I,
-//! paired t-tests, and figures.
+//! paired t-tests, and figures; [`robustness`]: the same methods on turned, moved and
+//! incomplete sweeps, counting refusals and silent failures.
+
+pub mod robustness;
 
 use crate::baselines;
 use crate::demo::write_figures;
@@ -183,6 +186,45 @@ fn dist(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
+/// `f` of every case on `jobs` threads, the results in completion order; after each case
+/// `progress` gets one line ("eval: 3/40 {what}, 2 s").
+fn parallel<C: Sync, R: Send>(
+    cases: &[C],
+    jobs: usize,
+    what: &str,
+    progress: &mut (dyn FnMut(&str) + Send),
+    f: impl Fn(&C) -> Vec<R> + Sync,
+) -> Vec<R> {
+    let next = AtomicUsize::new(0);
+    let done = AtomicUsize::new(0);
+    let results = Mutex::new(Vec::<R>::new());
+    let progress = Mutex::new(progress);
+    let t0 = Instant::now();
+    std::thread::scope(|s| {
+        for _ in 0..jobs.max(1) {
+            s.spawn(|| loop {
+                let k = next.fetch_add(1, Ordering::Relaxed);
+                let Some(case) = cases.get(k) else {
+                    break;
+                };
+                let rows = f(case);
+                results
+                    .lock()
+                    .unwrap_or_else(|p| p.into_inner())
+                    .extend(rows);
+                let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+                let mut p = progress.lock().unwrap_or_else(|p| p.into_inner());
+                p(&format!(
+                    "eval: {n}/{} {what}, {:.0} s",
+                    cases.len(),
+                    t0.elapsed().as_secs_f64()
+                ));
+            });
+        }
+    });
+    results.into_inner().unwrap_or_else(|p| p.into_inner())
+}
+
 /// Runs the evaluation and writes `out/table.md`, `out/results.json` and the figures.
 /// Returns the markdown table.
 pub fn run_eval(
@@ -200,44 +242,18 @@ pub fn run_eval(
         .iter()
         .flat_map(|&v| (0..cfg.pairs).map(move |s| (v, s)))
         .collect();
-    let next = AtomicUsize::new(0);
-    let done = AtomicUsize::new(0);
-    let results = Mutex::new(Vec::<CaseResult>::new());
-    let progress = Mutex::new(progress);
-    let t0 = Instant::now();
-    std::thread::scope(|s| {
-        for _ in 0..cfg.jobs.max(1) {
-            s.spawn(|| loop {
-                let k = next.fetch_add(1, Ordering::Relaxed);
-                let Some(&(variant, seed)) = cases.get(k) else {
-                    break;
-                };
-                let pair = PhantomPair::generate(&PhantomConfig {
-                    seed,
-                    variant,
-                    ..PhantomConfig::default()
-                });
-                let rows: Vec<CaseResult> = cfg
-                    .methods
-                    .iter()
-                    .map(|&m| evaluate(m, &pair, variant, seed))
-                    .collect();
-                results
-                    .lock()
-                    .unwrap_or_else(|p| p.into_inner())
-                    .extend(rows);
-                let n = done.fetch_add(1, Ordering::Relaxed) + 1;
-                let mut p = progress.lock().unwrap_or_else(|p| p.into_inner());
-                p(&format!(
-                    "eval: {n}/{} pairs ({} methods each), {:.0} s",
-                    cases.len(),
-                    cfg.methods.len(),
-                    t0.elapsed().as_secs_f64()
-                ));
-            });
-        }
+    let what = format!("pairs ({} methods each)", cfg.methods.len());
+    let mut results = parallel(&cases, cfg.jobs, &what, progress, |&(variant, seed)| {
+        let pair = PhantomPair::generate(&PhantomConfig {
+            seed,
+            variant,
+            ..PhantomConfig::default()
+        });
+        cfg.methods
+            .iter()
+            .map(|&m| evaluate(m, &pair, variant, seed))
+            .collect()
     });
-    let mut results = results.into_inner().unwrap_or_else(|p| p.into_inner());
     results.sort_by(|a, b| (&a.variant, a.seed, &a.method).cmp(&(&b.variant, b.seed, &b.method)));
     let table = markdown(cfg, &results);
     io::write_text(&out.join("table.md"), &table)?;

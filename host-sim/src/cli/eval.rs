@@ -21,6 +21,11 @@ pub struct Args {
     /// Only our two methods (skip the slower baselines).
     #[arg(long)]
     ours_only: bool,
+    /// The robustness sweep instead of the accuracy table: every pair turned (a yaw grid,
+    /// random rotations) and moved 0.5 m, sparse, or missing a side or rib 5; counts
+    /// accepted runs, refusals and silent failures (writes robustness.md and .json).
+    #[arg(long)]
+    robustness: bool,
     /// Output folder (created if missing).
     #[arg(long, default_value = "out/eval")]
     out_dir: PathBuf,
@@ -60,7 +65,11 @@ pub fn run(args: &Args, ctx: &Context) -> Result<(), CliError> {
         (false, true) => eprint!("\r{l}   "),
         (false, false) => eprintln!("{l}"),
     };
-    let r = eval::run_eval(&cfg, &args.out_dir, &mut line);
+    let r = if args.robustness {
+        eval::robustness::run_robustness(&cfg, &args.out_dir, &mut line)
+    } else {
+        eval::run_eval(&cfg, &args.out_dir, &mut line)
+    };
     if tty && !quiet {
         eprintln!();
     }

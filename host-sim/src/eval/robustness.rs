@@ -1,0 +1,445 @@
+//! `ribreg eval --robustness`: every method on phantom pairs turned and moved as a robot
+//! base may stand against the patient, and on sweeps that miss part of the chest. Counts,
+//! per case and method, the runs accepted, refused, and accepted but wrong (a *silent
+//! failure*: a waypoint more than [`SILENT_FAILURE_MM`] off, reported as a success).
+//!
+//! The cases, on every pair (the truth is turned and moved with the target):
+//! - `yaw D°` for D = 0, 45, …, 315: turned about the patient's anterior axis through the
+//!   sweep's centroid, then moved [`MOVE_MM`] (a robot beside the bed, at its head, …);
+//! - `rotation k` for k = 1..=[`ROTATIONS`]: a uniformly random 3-D rotation, then moved;
+//! - `sparse`: [`SPARSE_FRACTION`] of the sweep's points, at random (complete coverage);
+//! - `left side missing`, `right side missing`, `rib 5 missing`: that cartilage's points
+//!   removed (outliers and the sternum kept). These sweeps cannot support every waypoint:
+//!   the product's goal is that they are refused.
+
+use super::{evaluate, parallel, variant_name, CaseResult, EvalConfig};
+use crate::error::CliError;
+use crate::io;
+use crate::phantom::{gaussian, Part, PhantomConfig, PhantomPair, Pose, Side, Variant};
+use ribreg_core::math::rng::Rng;
+use serde_json::json;
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// A waypoint this far off (mm) in an accepted run is a silent failure: twice the window
+/// between two ribs, so the probe would land on a rib or beside the chest.
+pub const SILENT_FAILURE_MM: f64 = 10.0;
+/// How far every turned case is also moved, mm (the sweep arrives in the robot's base
+/// frame, half a metre or more from where the template sits).
+pub const MOVE_MM: f64 = 500.0;
+/// Random 3-D rotations per pair.
+pub const ROTATIONS: u64 = 4;
+/// The share of the sweep's points the sparse case keeps.
+pub const SPARSE_FRACTION: f64 = 0.3;
+/// Yaw steps, degrees.
+const YAW_STEP_DEG: u32 = 45;
+
+/// One perturbation of a phantom pair.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Case {
+    /// Turned about the anterior axis by this many degrees, then moved.
+    Yaw(u32),
+    /// The k-th random rotation (1-based), then moved.
+    Rotation(u64),
+    /// A random [`SPARSE_FRACTION`] of the points.
+    Sparse,
+    /// One side's cartilages not scanned.
+    SideMissing(Side),
+    /// Rib 5's cartilages (both sides) not scanned.
+    Rib5Missing,
+}
+
+impl Case {
+    /// Every case, in table order.
+    pub fn all() -> Vec<Case> {
+        let mut v: Vec<Case> = (0..360 / YAW_STEP_DEG)
+            .map(|k| Case::Yaw(k * YAW_STEP_DEG))
+            .collect();
+        v.extend((1..=ROTATIONS).map(Case::Rotation));
+        v.extend([
+            Case::Sparse,
+            Case::SideMissing(Side::Left),
+            Case::SideMissing(Side::Right),
+            Case::Rib5Missing,
+        ]);
+        v
+    }
+
+    /// Name in tables.
+    pub fn name(self) -> String {
+        match self {
+            Case::Yaw(d) => format!("yaw {d}°"),
+            Case::Rotation(k) => format!("rotation {k}"),
+            Case::Sparse => format!("sparse ({:.0} %)", SPARSE_FRACTION * 100.0),
+            Case::SideMissing(Side::Left) => "left side missing".into(),
+            Case::SideMissing(Side::Right) => "right side missing".into(),
+            Case::Rib5Missing => "rib 5 missing".into(),
+        }
+    }
+
+    /// Whether the sweep still covers every waypoint (then a refusal is a false alarm).
+    pub fn complete(self) -> bool {
+        !matches!(self, Case::SideMissing(_) | Case::Rib5Missing)
+    }
+
+    /// `pair` perturbed: the target's points (and their materials) filtered and moved,
+    /// the truth (pose, true waypoints) moved with them. `seed` drives the random choices.
+    pub fn apply(self, pair: &PhantomPair, seed: u64) -> PhantomPair {
+        let mut rng = Rng::new(seed ^ 0x005E_ED0F_0B05_u64.wrapping_mul(self.stream()));
+        let keep = |m: &Option<crate::phantom::Material>, rng: &mut Rng| match (self, m) {
+            (Case::Sparse, _) => rng.next_f64() < SPARSE_FRACTION,
+            (Case::SideMissing(s), Some(m)) => {
+                !matches!(m.part, Part::Cartilage { side, .. } if side == s)
+            }
+            (Case::Rib5Missing, Some(m)) => !matches!(m.part, Part::Cartilage { rib: 5, .. }),
+            _ => true,
+        };
+        let (target, target_material): (Vec<_>, Vec<_>) = pair
+            .target
+            .iter()
+            .zip(&pair.target_material)
+            .filter(|(_, m)| keep(m, &mut rng))
+            .map(|(p, m)| (*p, *m))
+            .unzip();
+        let moved = match self {
+            Case::Yaw(d) => {
+                let anterior = pair.pose.apply_vector([0.0, 0.0, 1.0]);
+                about_centroid(&target, anterior, f64::from(d).to_radians(), &mut rng)
+            }
+            Case::Rotation(_) => {
+                let (axis, angle) = random_rotation(&mut rng);
+                about_centroid(&target, axis, angle, &mut rng)
+            }
+            _ => Pose::identity(),
+        };
+        let mut out = pair.clone();
+        out.target = target.iter().map(|&p| moved.apply(p)).collect();
+        out.target_material = target_material;
+        out.pose = moved.compose(&pair.pose);
+        out.true_waypoints = pair
+            .true_waypoints
+            .iter()
+            .map(|&p| moved.apply(p))
+            .collect();
+        out
+    }
+
+    fn stream(self) -> u64 {
+        match self {
+            Case::Yaw(d) => 1 + u64::from(d),
+            Case::Rotation(k) => 1000 + k,
+            Case::Sparse => 2000,
+            Case::SideMissing(Side::Left) => 2001,
+            Case::SideMissing(Side::Right) => 2002,
+            Case::Rib5Missing => 2003,
+        }
+    }
+}
+
+/// Rotation by `angle` about `axis` through the centroid of `points`, then a move of
+/// [`MOVE_MM`] in a random direction.
+fn about_centroid(points: &[[f64; 3]], axis: [f64; 3], angle: f64, rng: &mut Rng) -> Pose {
+    let n = points.len().max(1) as f64;
+    let c = points.iter().fold([0.0; 3], |a, p| {
+        [a[0] + p[0] / n, a[1] + p[1] / n, a[2] + p[2] / n]
+    });
+    let turn = Pose::from_axis_angle(axis, angle, [0.0; 3]);
+    let (dir, _) = random_rotation(rng);
+    let rc = turn.apply(c);
+    let translation = [0, 1, 2].map(|i| c[i] - rc[i] + MOVE_MM * dir[i]);
+    Pose {
+        translation,
+        ..turn
+    }
+}
+
+/// A uniformly random rotation (a unit quaternion of four Gaussians) as axis and angle.
+fn random_rotation(rng: &mut Rng) -> ([f64; 3], f64) {
+    loop {
+        let q = [gaussian(rng), gaussian(rng), gaussian(rng), gaussian(rng)];
+        let n = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let v = (q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
+        if n > 1e-6 && v > 1e-9 {
+            let angle = 2.0 * v.atan2(q[0].abs());
+            let s = q[0].signum() / v;
+            return ([q[1] * s, q[2] * s, q[3] * s], angle);
+        }
+    }
+}
+
+/// One method on one perturbed pair.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct RobustResult {
+    /// The case's name.
+    pub case: String,
+    /// Whether the case keeps complete coverage.
+    pub complete: bool,
+    /// `accepted`, `refused` or `silent failure`.
+    pub outcome: &'static str,
+    /// The largest waypoint error of an accepted run, mm.
+    pub waypoint_max: Option<f64>,
+    /// The run itself.
+    pub result: CaseResult,
+}
+
+fn outcome(r: &CaseResult) -> (&'static str, Option<f64>) {
+    if r.error.is_some() {
+        return ("refused", None);
+    }
+    // A NaN error is as silent as a large one (`f64::max` would drop it).
+    let max = r
+        .waypoint_errors
+        .iter()
+        .copied()
+        .fold(0.0, |a: f64, e| if e.is_nan() { e } else { a.max(e) });
+    if max.is_nan() || max > SILENT_FAILURE_MM {
+        ("silent failure", Some(max))
+    } else {
+        ("accepted", Some(max))
+    }
+}
+
+/// Runs the sweep; writes `out/robustness.md` and `out/robustness.json`; returns the table.
+pub fn run_robustness(
+    cfg: &EvalConfig,
+    out: &Path,
+    progress: &mut (dyn FnMut(&str) + Send),
+) -> Result<String, CliError> {
+    std::fs::create_dir_all(out).map_err(|source| io::IoError::Io {
+        path: out.to_owned(),
+        op: "cannot create the directory",
+        source,
+    })?;
+    let cases: Vec<(Variant, u64)> = cfg
+        .variants
+        .iter()
+        .flat_map(|&v| (0..cfg.pairs).map(move |s| (v, s)))
+        .collect();
+    let what = format!(
+        "pairs ({} cases × {} methods each)",
+        Case::all().len(),
+        cfg.methods.len()
+    );
+    let mut results = parallel(&cases, cfg.jobs, &what, progress, |&(variant, seed)| {
+        let pair = PhantomPair::generate(&PhantomConfig {
+            seed,
+            variant,
+            ..PhantomConfig::default()
+        });
+        let mut rows = vec![];
+        for case in Case::all() {
+            let moved = case.apply(&pair, seed);
+            for &m in &cfg.methods {
+                let result = evaluate(m, &moved, variant, seed);
+                let (outcome, waypoint_max) = outcome(&result);
+                rows.push(RobustResult {
+                    case: case.name(),
+                    complete: case.complete(),
+                    outcome,
+                    waypoint_max,
+                    result,
+                });
+            }
+        }
+        rows
+    });
+    let order = |r: &RobustResult| {
+        let case = Case::all().iter().position(|c| c.name() == r.case);
+        (
+            case,
+            r.result.variant.clone(),
+            r.result.seed,
+            r.result.method.clone(),
+        )
+    };
+    results.sort_by_key(order);
+    let table = markdown(cfg, &results);
+    io::write_text(&out.join("robustness.md"), &table)?;
+    let json = json!({ "pairs": cfg.pairs, "silent_failure_mm": SILENT_FAILURE_MM,
+        "move_mm": MOVE_MM, "cases": results });
+    let text = serde_json::to_string_pretty(&json)
+        .map_err(|e| CliError::Output(format!("robustness results: {e}")))?;
+    io::write_text(&out.join("robustness.json"), &text)?;
+    Ok(table)
+}
+
+/// Counts of one group of runs.
+#[derive(Default)]
+struct Counts {
+    runs: usize,
+    accepted: usize,
+    refused: usize,
+    silent: usize,
+    worst: f64,
+}
+
+impl Counts {
+    fn of<'a>(rows: impl Iterator<Item = &'a RobustResult>) -> Counts {
+        let mut c = Counts::default();
+        for r in rows {
+            c.runs += 1;
+            match r.outcome {
+                "accepted" => c.accepted += 1,
+                "refused" => c.refused += 1,
+                _ => c.silent += 1,
+            }
+            if r.outcome == "accepted" {
+                c.worst = c.worst.max(r.waypoint_max.unwrap_or(0.0));
+            }
+        }
+        c
+    }
+
+    fn row(&self, label: &str, method: &str) -> String {
+        let worst = if self.accepted > 0 {
+            format!("{:.1}", self.worst)
+        } else {
+            "—".into()
+        };
+        format!(
+            "| {label} | {method} | {} | {} | {} | {} | {worst} |",
+            self.runs, self.accepted, self.refused, self.silent
+        )
+    }
+}
+
+fn markdown(cfg: &EvalConfig, results: &[RobustResult]) -> String {
+    let mut s = String::new();
+    let variants: Vec<&str> = cfg.variants.iter().map(|&v| variant_name(v)).collect();
+    let _ = writeln!(
+        s,
+        "Robustness sweep: phantom pairs {} (seeds 0..{}, {}), each turned and moved \
+         {MOVE_MM:.0} mm or cut as the case says. A silent failure is a run reported as a \
+         success with a waypoint more than {SILENT_FAILURE_MM:.0} mm off; worst: the largest \
+         waypoint error of an accepted run, mm.\n",
+        cfg.pairs,
+        cfg.pairs,
+        variants.join(" and ")
+    );
+    let _ = writeln!(
+        s,
+        "| case | method | runs | accepted | refused | silent failures | worst accepted |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|");
+    let methods: Vec<String> = cfg.methods.iter().map(|m| m.name()).collect();
+    for case in Case::all() {
+        let name = case.name();
+        for m in &methods {
+            let c = Counts::of(
+                results
+                    .iter()
+                    .filter(|r| r.case == name && &r.result.method == m),
+            );
+            let _ = writeln!(s, "{}", c.row(&name, m));
+        }
+    }
+    let _ = writeln!(s, "\nIn all:\n");
+    let _ = writeln!(
+        s,
+        "| coverage | method | runs | accepted | refused | silent failures | worst accepted |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|");
+    for (label, complete) in [("complete", true), ("incomplete", false)] {
+        for m in &methods {
+            let c = Counts::of(
+                results
+                    .iter()
+                    .filter(|r| r.complete == complete && &r.result.method == m),
+            );
+            let _ = writeln!(s, "{}", c.row(label, m));
+        }
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
+        (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt()
+    }
+
+    #[test]
+    fn turned_cases_move_the_truth_with_the_target() {
+        let pair = PhantomPair::generate(&PhantomConfig::default());
+        for case in [Case::Yaw(90), Case::Yaw(180), Case::Rotation(1)] {
+            let moved = case.apply(&pair, 3);
+            assert_eq!(moved.target.len(), pair.target.len());
+            // Rigid: distances between points are kept.
+            let d0 = dist(pair.target[0], pair.target[100]);
+            let d1 = dist(moved.target[0], moved.target[100]);
+            assert!((d0 - d1).abs() < 1e-9, "{case:?}");
+            // The truth moved with it: a target point keeps its offset from a waypoint.
+            let (w0, w1) = (pair.true_waypoints[0], moved.true_waypoints[0]);
+            assert!((dist(pair.target[7], w0) - dist(moved.target[7], w1)).abs() < 1e-9);
+            let (t0, t1) = (pair.true_positions(), moved.true_positions());
+            assert!((dist(pair.target[7], t0[5]) - dist(moved.target[7], t1[5])).abs() < 1e-9);
+            // Moved about half a metre.
+            let shift = dist(pair.target[0], moved.target[0]);
+            assert!(shift > 0.5 * MOVE_MM, "{case:?}: {shift}");
+        }
+        // Yaw is about the anterior axis: the anterior component is unchanged up to the move.
+        let yaw = Case::Yaw(90).apply(&pair, 3);
+        let z = pair.pose.apply_vector([0.0, 0.0, 1.0]);
+        let along = |a: [f64; 3], b: [f64; 3]| (0..3).map(|i| (a[i] - b[i]) * z[i]).sum::<f64>();
+        let before = along(pair.target[0], pair.target[100]);
+        let after = along(yaw.target[0], yaw.target[100]);
+        assert!((before - after).abs() < 1e-9);
+    }
+
+    #[test]
+    fn cut_cases_remove_exactly_their_part() {
+        let pair = PhantomPair::generate(&PhantomConfig::default());
+        let left = Case::SideMissing(Side::Left).apply(&pair, 0);
+        assert!(left.target.len() < pair.target.len());
+        assert!(left.target_material.iter().flatten().all(|m| !matches!(
+            m.part,
+            Part::Cartilage {
+                side: Side::Left,
+                ..
+            }
+        )));
+        assert!(left.target_material.iter().flatten().any(|m| matches!(
+            m.part,
+            Part::Cartilage {
+                side: Side::Right,
+                ..
+            }
+        )));
+        assert_eq!(left.outlier_count(), pair.outlier_count());
+        let rib5 = Case::Rib5Missing.apply(&pair, 0);
+        assert!(rib5
+            .target_material
+            .iter()
+            .flatten()
+            .all(|m| !matches!(m.part, Part::Cartilage { rib: 5, .. })));
+        let sparse = Case::Sparse.apply(&pair, 0);
+        let share = sparse.target.len() as f64 / pair.target.len() as f64;
+        assert!((share - SPARSE_FRACTION).abs() < 0.05, "{share}");
+        // Not moved.
+        assert_eq!(rib5.true_waypoints, pair.true_waypoints);
+    }
+
+    #[test]
+    fn a_far_waypoint_is_a_silent_failure_and_an_error_a_refusal() {
+        let mut r = CaseResult {
+            method: "m".into(),
+            variant: "aligned".into(),
+            seed: 0,
+            error: None,
+            ed: Default::default(),
+            hd: 0.0,
+            dense: Default::default(),
+            waypoint_errors: vec![1.0, 10.5],
+            runtime_ms: 0.0,
+        };
+        assert_eq!(outcome(&r).0, "silent failure");
+        r.waypoint_errors = vec![1.0, f64::NAN];
+        assert_eq!(outcome(&r).0, "silent failure");
+        r.waypoint_errors = vec![1.0, 9.9];
+        assert_eq!(outcome(&r), ("accepted", Some(9.9)));
+        r.error = Some("no".into());
+        assert_eq!(outcome(&r).0, "refused");
+    }
+}
