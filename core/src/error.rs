@@ -29,6 +29,16 @@ pub enum Stream {
     Frames,
 }
 
+/// A side of the patient, in ribreg's patient frame (x toward the patient's left).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Side {
+    /// The patient's left, +x.
+    Left,
+    /// The patient's right, −x.
+    Right,
+}
+
 /// Everything that can go wrong in the core. Every variant names what was found and,
 /// where it applies, what was expected.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -175,6 +185,20 @@ pub enum Error {
         /// Index of the offending pixel in its frame.
         index: u32,
     },
+    /// The target does not show one side of a rib: the rib's fitted curve spans too
+    /// little of the template's on that side (guided model; see
+    /// [`crate::registration::guided::check_coverage`]). A sweep that missed a side or a
+    /// rib; a registration from it would carry waypoints there from the wrong cartilage.
+    NotSeen {
+        /// Rib number 2..=5.
+        rib: u8,
+        /// The side.
+        side: Side,
+        /// Span of the target's rib on that side, percent of the template's.
+        percent: u8,
+        /// Least accepted, percent.
+        min_percent: u8,
+    },
 }
 
 impl fmt::Display for Cloud {
@@ -183,6 +207,15 @@ impl fmt::Display for Cloud {
             Cloud::Template => "template",
             Cloud::Target => "target",
             Cloud::Query => "query",
+        })
+    }
+}
+
+impl fmt::Display for Side {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Side::Left => "left (+x)",
+            Side::Right => "right (−x)",
         })
     }
 }
@@ -279,6 +312,12 @@ impl fmt::Display for Error {
             Error::Pixel { index } => {
                 write!(f, "pixel {index} of the frame is outside the image or not finite")
             }
+            Error::NotSeen { rib, side, percent, min_percent } => write!(
+                f,
+                "rib {rib} not seen on the patient's {side}: the target's rib spans {percent} % \
+                 of the template's there, at least {min_percent} % is needed (did the sweep \
+                 miss that side or that rib? scan it and register again)"
+            ),
         }
     }
 }

@@ -10,10 +10,10 @@ use crate::io::prepared::TemplateFile;
 use crate::io::{self, Cloud, PlyFormat};
 use ribreg_core::config::{Config, RIBS, RIB_SAMPLES};
 use ribreg_core::error::Cloud as Which;
-use ribreg_core::registration::anterior;
 use ribreg_core::registration::local_rigid::TransformCache;
 use ribreg_core::registration::metrics::{compare, Metrics};
 use ribreg_core::registration::pipeline::{register, Registration, Template};
+use ribreg_core::registration::{anterior, guided};
 
 use ribreg_core::limits::MAX_COORD_MM;
 use ribreg_core::{Error, Vec3};
@@ -298,6 +298,7 @@ pub fn register_prepared(
             "rotation": rows(&reg.pose.rotation),
             "translation": reg.pose.translation.as_slice(),
         },
+        "coverage": coverage_json(&tpl, &reg),
         "metrics": {
             "ed_mean_mm": metrics.ed.mean,
             "ed_sd_mm": metrics.ed.sd,
@@ -354,6 +355,26 @@ fn skeleton_json(tpl: &Template, reg: &Registration) -> Value {
         "target": pts(&reg.skeleton.points),
         "ribs": ribs,
     })
+}
+
+/// Guided model: each rib side's span as a share of the template's, and the least
+/// accepted (`guided::check_coverage`); `null` for the graph model.
+fn coverage_json(tpl: &Template, reg: &Registration) -> Value {
+    if tpl.ends.is_some() {
+        return Value::Null;
+    }
+    let spans = guided::side_spans(
+        &tpl.skeleton.points,
+        &tpl.midline_fraction,
+        &reg.skeleton.points,
+        &reg.pose,
+    );
+    let ribs: Vec<Value> = RIBS
+        .iter()
+        .zip(&spans)
+        .map(|(rib, [right, left])| json!({ "rib": rib, "right": right, "left": left }))
+        .collect();
+    json!({ "min_side_span": guided::MIN_SIDE_SPAN, "side_spans": ribs })
 }
 
 fn rows(m: &nalgebra::Matrix3<f32>) -> Vec<[f32; 3]> {

@@ -6,7 +6,9 @@ use crate::error::{Cloud, Error, Result};
 use crate::limits::{MAX_CLOUD_POINTS, MIN_CLOUD_POINTS};
 use crate::math::geom::{nearest, validate, Frame, Rigid};
 use crate::registration::endpoints::{match_endpoints, EndpointMatch};
-use crate::registration::guided::{fit_ribs, label_nodes, GuidedStage, NodeLabels, TargetSkeleton};
+use crate::registration::guided::{
+    check_coverage, fit_ribs, label_nodes, GuidedStage, NodeLabels, TargetSkeleton,
+};
 use crate::registration::local_rigid::LocalRigid;
 use crate::registration::skeleton::{GraphBuild, RibEnds, RibSkeleton, SkeletonGraph};
 use crate::Vec3;
@@ -331,6 +333,14 @@ impl Registering {
             return Err(Error::Config("the guided rib model did not finish"));
         };
         let (pose, points) = run.result().ok_or(Error::RigidFit)?;
+        // A sweep that misses a side or a rib is refused, not mapped from the wrong
+        // cartilage.
+        check_coverage(
+            &template.skeleton.points,
+            &template.midline_fraction,
+            &points,
+            &pose,
+        )?;
         let skeleton = RibSkeleton {
             points,
             paths: Default::default(),

@@ -386,5 +386,6 @@ pub fn error_code(e: &crate::error::Error) -> u8 {
         E::OutsideTrack { .. } => 17,
         E::TrackGap { .. } => 18,
         E::Pixel { .. } => 19,
+        E::NotSeen { .. } => 20,
     }
 }

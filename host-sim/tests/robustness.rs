@@ -1,0 +1,104 @@
+//! Refuse instead of failing silently: the improved method on phantom sweeps turned and
+//! moved as a robot base may stand, and on sweeps that miss a side or a rib (the cases of
+//! `ribreg eval --robustness`). Every run is refused or lands every waypoint within
+//! `SILENT_FAILURE_MM`; incomplete sweeps are refused, naming what is missing.
+
+use ribreg_core::error::Cloud;
+use ribreg_core::Error;
+use ribreg_sim::eval::robustness::{Case, SILENT_FAILURE_MM};
+use ribreg_sim::phantom::{PhantomConfig, PhantomPair, Side, Variant};
+use ribreg_sim::register::{register_clouds, to_core, Method};
+
+/// The improved method on `pair`: the largest waypoint error, or the core's refusal.
+fn run(pair: &PhantomPair) -> Result<f64, Error> {
+    let tpl = to_core(&pair.template.points, Cloud::Template).unwrap();
+    let tgt = to_core(&pair.target, Cloud::Target).unwrap();
+    let wps = to_core(&pair.template_waypoints, Cloud::Query).unwrap();
+    let labels: Vec<u8> = pair.template.labels.iter().map(|&l| l as u8).collect();
+    match register_clouds(
+        &tpl,
+        Some(&labels),
+        &tgt,
+        Some(&wps),
+        Method::Improved,
+        &mut |_| (),
+    ) {
+        Ok(o) => Ok(o
+            .waypoints
+            .unwrap()
+            .iter()
+            .zip(&pair.true_waypoints)
+            .map(|(a, b)| {
+                (0..3)
+                    .map(|k| (f64::from(a[k]) - b[k]).powi(2))
+                    .sum::<f64>()
+                    .sqrt()
+            })
+            .fold(0.0, f64::max)),
+        Err(e) => Err(e),
+    }
+}
+
+fn pair(seed: u64) -> PhantomPair {
+    PhantomPair::generate(&PhantomConfig {
+        seed,
+        variant: Variant::Misaligned,
+        ..PhantomConfig::default()
+    })
+}
+
+#[test]
+fn turned_and_moved_sweeps_are_registered_or_refused_never_wrong() {
+    let cases = [Case::Yaw(90), Case::Yaw(180), Case::Rotation(1)];
+    let (mut accepted, mut runs) = (0, 0);
+    for seed in 0..6 {
+        let p = pair(seed);
+        for case in cases {
+            runs += 1;
+            match run(&case.apply(&p, seed)) {
+                Ok(max) => {
+                    assert!(
+                        max <= SILENT_FAILURE_MM,
+                        "seed {seed}, {}: accepted with a waypoint {max:.1} mm off",
+                        case.name()
+                    );
+                    accepted += 1;
+                }
+                Err(e) => eprintln!("seed {seed}, {}: refused: {e}", case.name()),
+            }
+        }
+    }
+    // Refusing everything would pass the loop above: most runs must go through.
+    assert!(accepted * 10 >= runs * 9, "{accepted} of {runs} accepted");
+}
+
+#[test]
+fn sweeps_missing_a_side_or_a_rib_are_refused() {
+    for seed in 0..4 {
+        let p = pair(seed);
+        for case in [
+            Case::SideMissing(Side::Left),
+            Case::SideMissing(Side::Right),
+            Case::Rib5Missing,
+        ] {
+            let e = run(&case.apply(&p, seed)).expect_err(&format!("seed {seed}, {}", case.name()));
+            assert!(
+                matches!(e, Error::NotSeen { .. } | Error::RibPath { .. }),
+                "seed {seed}, {}: {e}",
+                case.name()
+            );
+        }
+    }
+}
+
+/// Phantom 12 turned by 90° used to come back flipped (waypoints 108 mm off, exit 0): the
+/// template's ribs squeezed onto part of the chest. Now refused as not seen.
+#[test]
+fn a_flipped_registration_is_refused() {
+    let p = pair(12);
+    assert!(run(&p).unwrap() <= SILENT_FAILURE_MM);
+    let e = run(&Case::Yaw(90).apply(&p, 12)).unwrap_err();
+    assert!(matches!(e, Error::NotSeen { .. }), "{e}");
+    let text = e.to_string();
+    assert!(text.contains("not seen on the patient's"), "{text}");
+}
