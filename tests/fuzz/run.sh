@@ -3,9 +3,13 @@
 # (tests/fuzz/seeds.py) plus what earlier runs kept (tests/fuzz/corpus/, not in git).
 # Prints one line per target: executions, corpus size, and what was found; exits non-zero
 # on a crash, a leak, a timeout or an out-of-memory (the input is left under
-# tests/fuzz/artifacts/TARGET/; turn it into a regression test).
+# tests/fuzz/artifacts/TARGET/; turn it into a regression: fix it, and keep the input
+# under tests/fuzz/regressions/TARGET/, which every run replays).
 #
 #   bash tests/fuzz/run.sh SECONDS [TARGET...]
+#
+# With FUZZ_RUNS=N in the environment a target also stops after N executions (the
+# README's long campaign: FUZZ_RUNS=10000000 and a generous SECONDS).
 #
 # Installs cargo-fuzz if missing. On a stable toolchain the sanitizer flags need
 # RUSTC_BOOTSTRAP=1 (set here unless a nightly is the default).
@@ -40,9 +44,12 @@ printf '%-14s %12s %8s %s\n' target executions corpus result
 for t in "${TARGETS[@]}"; do
     mkdir -p "corpus/$t" "artifacts/$t"
     log="artifacts/$t/last-run.log"
-    if cargo fuzz run -O "$t" "corpus/$t" "../../target/fuzz-seeds/$t" -- \
+    # Inputs that once failed (regressions/TARGET/, in git) run first, every time.
+    regressions=()
+    [ -d "regressions/$t" ] && regressions=("regressions/$t")
+    if cargo fuzz run -O "$t" "corpus/$t" "../../target/fuzz-seeds/$t" "${regressions[@]}" -- \
         -max_total_time="$SECONDS_EACH" -max_len=65536 -rss_limit_mb=2048 -timeout=30 \
-        -print_final_stats=1 -detect_leaks=1 >"$log" 2>&1; then
+        -print_final_stats=1 -detect_leaks=1 ${FUZZ_RUNS:+-runs="$FUZZ_RUNS"} >"$log" 2>&1; then
         result="no crash, leak or timeout"
     else
         result="FOUND: $(grep -m1 -E 'ERROR|panicked|Test unit written' "$log" || tail -n 1 "$log")"
