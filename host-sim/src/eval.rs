@@ -225,6 +225,29 @@ fn parallel<C: Sync, R: Send>(
     results.into_inner().unwrap_or_else(|p| p.into_inner())
 }
 
+/// Creates the output folder; the (variant, seed) of every pair `cfg` asks for.
+fn prepare(cfg: &EvalConfig, out: &Path) -> Result<Vec<(Variant, u64)>, CliError> {
+    std::fs::create_dir_all(out).map_err(|source| io::IoError::Io {
+        path: out.to_owned(),
+        op: "cannot create the directory",
+        source,
+    })?;
+    Ok(cfg
+        .variants
+        .iter()
+        .flat_map(|&v| (0..cfg.pairs).map(move |s| (v, s)))
+        .collect())
+}
+
+/// The phantom pair of one (variant, seed).
+fn phantom(variant: Variant, seed: u64) -> PhantomPair {
+    PhantomPair::generate(&PhantomConfig {
+        seed,
+        variant,
+        ..PhantomConfig::default()
+    })
+}
+
 /// Runs the evaluation and writes `out/table.md`, `out/results.json` and the figures.
 /// Returns the markdown table.
 pub fn run_eval(
@@ -232,23 +255,10 @@ pub fn run_eval(
     out: &Path,
     progress: &mut (dyn FnMut(&str) + Send),
 ) -> Result<String, CliError> {
-    std::fs::create_dir_all(out).map_err(|source| io::IoError::Io {
-        path: out.to_owned(),
-        op: "cannot create the directory",
-        source,
-    })?;
-    let cases: Vec<(Variant, u64)> = cfg
-        .variants
-        .iter()
-        .flat_map(|&v| (0..cfg.pairs).map(move |s| (v, s)))
-        .collect();
+    let cases = prepare(cfg, out)?;
     let what = format!("pairs ({} methods each)", cfg.methods.len());
     let mut results = parallel(&cases, cfg.jobs, &what, progress, |&(variant, seed)| {
-        let pair = PhantomPair::generate(&PhantomConfig {
-            seed,
-            variant,
-            ..PhantomConfig::default()
-        });
+        let pair = phantom(variant, seed);
         cfg.methods
             .iter()
             .map(|&m| evaluate(m, &pair, variant, seed))

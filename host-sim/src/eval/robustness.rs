@@ -12,10 +12,10 @@
 //!   removed (outliers and the sternum kept). These sweeps cannot support every waypoint:
 //!   the product's goal is that they are refused.
 
-use super::{evaluate, parallel, variant_name, CaseResult, EvalConfig};
+use super::{evaluate, parallel, phantom, prepare, variant_name, CaseResult, EvalConfig};
 use crate::error::CliError;
 use crate::io;
-use crate::phantom::{gaussian, Part, PhantomConfig, PhantomPair, Pose, Side, Variant};
+use crate::phantom::{gaussian, Part, PhantomPair, Pose, Side};
 use ribreg_core::math::rng::Rng;
 use serde_json::json;
 use std::fmt::Write as _;
@@ -205,27 +205,14 @@ pub fn run_robustness(
     out: &Path,
     progress: &mut (dyn FnMut(&str) + Send),
 ) -> Result<String, CliError> {
-    std::fs::create_dir_all(out).map_err(|source| io::IoError::Io {
-        path: out.to_owned(),
-        op: "cannot create the directory",
-        source,
-    })?;
-    let cases: Vec<(Variant, u64)> = cfg
-        .variants
-        .iter()
-        .flat_map(|&v| (0..cfg.pairs).map(move |s| (v, s)))
-        .collect();
+    let cases = prepare(cfg, out)?;
     let what = format!(
         "pairs ({} cases × {} methods each)",
         Case::all().len(),
         cfg.methods.len()
     );
     let mut results = parallel(&cases, cfg.jobs, &what, progress, |&(variant, seed)| {
-        let pair = PhantomPair::generate(&PhantomConfig {
-            seed,
-            variant,
-            ..PhantomConfig::default()
-        });
+        let pair = phantom(variant, seed);
         let mut rows = vec![];
         for case in Case::all() {
             let moved = case.apply(&pair, seed);
@@ -243,16 +230,16 @@ pub fn run_robustness(
         }
         rows
     });
-    let order = |r: &RobustResult| {
-        let case = Case::all().iter().position(|c| c.name() == r.case);
+    let names: Vec<String> = Case::all().into_iter().map(Case::name).collect();
+    results.sort_by_cached_key(|r| {
+        let case = names.iter().position(|n| *n == r.case);
         (
             case,
             r.result.variant.clone(),
             r.result.seed,
             r.result.method.clone(),
         )
-    };
-    results.sort_by_key(order);
+    });
     let table = markdown(cfg, &results);
     io::write_text(&out.join("robustness.md"), &table)?;
     let json = json!({ "pairs": cfg.pairs, "silent_failure_mm": SILENT_FAILURE_MM,
@@ -355,6 +342,7 @@ fn markdown(cfg: &EvalConfig, results: &[RobustResult]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::phantom::PhantomConfig;
 
     fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
         (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt()
