@@ -199,6 +199,20 @@ pub enum Error {
         /// Least accepted, percent.
         min_percent: u8,
     },
+    /// The target's pose is not clear (guided model; see
+    /// [`crate::registration::guided::PoseConfidence::check`]): the best pose hypothesis
+    /// fits too loosely, or a distinct one fits nearly as well. A sweep of something else,
+    /// or a chest so symmetric in what was scanned that a flip cannot be ruled out.
+    Ambiguous {
+        /// Residual of the best pose, tenths of a mm.
+        residual_dmm: u16,
+        /// Residual of the best distinct pose, tenths of a mm (saturated when none).
+        runner_up_dmm: u16,
+        /// Largest accepted residual, tenths of a mm.
+        max_residual_dmm: u16,
+        /// Least accepted runner-up residual, percent of the best's.
+        min_margin_percent: u8,
+    },
 }
 
 impl fmt::Display for Cloud {
@@ -318,6 +332,24 @@ impl fmt::Display for Error {
                  of the template's there, at least {min_percent} % is needed (did the sweep \
                  miss that side or that rib? scan it and register again)"
             ),
+            Error::Ambiguous {
+                residual_dmm,
+                runner_up_dmm,
+                max_residual_dmm,
+                min_margin_percent,
+            } => {
+                let mm = |d: u16| f32::from(d) / 10.0;
+                write!(
+                    f,
+                    "the target's pose is ambiguous: the best pose hypothesis fits with {:.1} mm \
+                     residual (at most {:.1} mm accepted) and the next distinct one with {:.1} mm \
+                     (at least {min_margin_percent} % of the best's needed); is the sweep of the \
+                     rib cartilage? scan more of both sides and register again",
+                    mm(residual_dmm),
+                    mm(max_residual_dmm),
+                    mm(runner_up_dmm),
+                )
+            }
         }
     }
 }

@@ -299,6 +299,7 @@ pub fn register_prepared(
             "translation": reg.pose.translation.as_slice(),
         },
         "coverage": coverage_json(&tpl, &reg),
+        "pose_hypotheses": confidence_json(&reg),
         "metrics": {
             "ed_mean_mm": metrics.ed.mean,
             "ed_sd_mm": metrics.ed.sd,
@@ -375,6 +376,24 @@ fn coverage_json(tpl: &Template, reg: &Registration) -> Value {
         .map(|(rib, [right, left])| json!({ "rib": rib, "right": right, "left": left }))
         .collect();
     json!({ "min_side_span": guided::MIN_SIDE_SPAN, "side_spans": ribs })
+}
+
+/// Guided model: the refined pose hypotheses' residuals and the accepted bounds
+/// (`guided::PoseConfidence`); `null` for the graph model.
+fn confidence_json(reg: &Registration) -> Value {
+    let Some(c) = reg.confidence else {
+        return Value::Null;
+    };
+    // JSON has no infinity: no distinct runner-up is `null`.
+    let finite = |v: f32| v.is_finite().then_some(v);
+    json!({
+        "hypotheses": c.hypotheses,
+        "residual_mm": c.residual_mm,
+        "runner_up_mm": finite(c.runner_up_mm),
+        "margin": finite(c.margin()),
+        "max_residual_mm": guided::MAX_POSE_RESIDUAL_MM,
+        "min_margin": guided::MIN_POSE_MARGIN,
+    })
 }
 
 fn rows(m: &nalgebra::Matrix3<f32>) -> Vec<[f32; 3]> {

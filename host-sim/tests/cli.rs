@@ -110,6 +110,14 @@ fn register_writes_every_output_in_template_order() {
     );
     assert!(report["metrics"]["hausdorff_mm"].as_f64().unwrap() > 0.0);
     assert!(report["timings_ms"]["register"].as_f64().is_some());
+    // How clearly the pose was found: within the accepted bounds.
+    let pose = &report["pose_hypotheses"];
+    let residual = pose["residual_mm"].as_f64().unwrap();
+    assert!(residual > 0.0 && residual <= pose["max_residual_mm"].as_f64().unwrap());
+    if let Some(m) = pose["margin"].as_f64() {
+        assert!(m >= pose["min_margin"].as_f64().unwrap(), "{pose}");
+    }
+    assert!(pose["hypotheses"].as_u64().unwrap() >= 1);
 }
 
 #[test]

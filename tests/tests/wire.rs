@@ -918,3 +918,36 @@ fn corrupted_frames_are_refused() {
     }
     assert_eq!(replaced.other_same_seq, 0, "{replaced:?}");
 }
+
+/// Every code a core error travels as has a summary, the refusals name what to do, and
+/// a fault prints as text (what `ribreg hil` shows), not as a number alone.
+#[test]
+fn error_codes_have_summaries() {
+    use ribreg_core::error::Side;
+    use ribreg_core::Error;
+    for code in 1..=21 {
+        assert_ne!(wire::error_summary(code), "unknown error", "code {code}");
+    }
+    assert_eq!(wire::error_summary(0), "unknown error");
+    assert_eq!(wire::error_summary(22), "unknown error");
+    let not_seen = Error::NotSeen {
+        rib: 5,
+        side: Side::Right,
+        percent: 40,
+        min_percent: 60,
+    };
+    let ambiguous = Error::Ambiguous {
+        residual_dmm: 40,
+        runner_up_dmm: 44,
+        max_residual_dmm: 70,
+        min_margin_percent: 125,
+    };
+    assert!(wire::error_summary(wire::error_code(&not_seen)).contains("not seen"));
+    assert!(wire::error_summary(wire::error_code(&ambiguous)).contains("ambiguous"));
+    let fault = wire::Fault::Registration(wire::error_code(&not_seen));
+    assert_eq!(
+        fault.to_string(),
+        "registration refused: a rib side was not seen in the sweep (scan it and register \
+         again) (error code 20)"
+    );
+}

@@ -4,7 +4,8 @@
 //! 1. **Coarse pose.** Rigid ICP of the 40 target key points onto the 40 template key
 //!    points from five starts — the identity and the four proper rotations that align
 //!    the two clouds' principal axes (axis signs `(±1, ±1)`, third from the cross
-//!    product) — each after centroid alignment, [`COARSE_ITERATIONS`] iterations of
+//!    product; the guided model also tries the four with the first two axes swapped,
+//!    [`CoarsePose::ALL_STARTS`]) — each after centroid alignment, [`COARSE_ITERATIONS`] iterations of
 //!    nearest-neighbour pairing and [`crate::math::kabsch::fit`]. The start with the lowest
 //!    final RMS wins (the sternum and the unequal cartilage lengths break the
 //!    near-symmetries of the chest). No initial alignment of the clouds is needed.
@@ -93,47 +94,73 @@ pub fn match_endpoints(
 /// their relative pose; `fs`, `fd` are their principal axes. Returns the pose and RMS.
 pub fn coarse_pose(src: &[Vec3], fs: &Frame, dst: &[Vec3], fd: &Frame) -> Result<(Rigid, f32)> {
     let tree = IcpTree::build(dst)?;
-    let mut run = CoarsePose::new(fs, fd);
+    let mut run = CoarsePose::new(fs, fd, CoarsePose::SIGN_STARTS);
     while !run.step(src, fs, dst, &tree, fd, u32::MAX)? {}
-    // Note: `step` returns `true` only after the fifth start, which sets the result.
+    // Note: `step` returns `true` only after the last start, which sets the result.
     run.result().ok_or(crate::error::Error::RigidFit)
 }
 
-/// [`coarse_pose`] in bounded steps (see [`Icp::step`]); the five starts run one after
-/// the other.
+/// Pose hypotheses a [`CoarsePose`] keeps: its best starts that end in distinct poses.
+pub const CANDIDATES: usize = 2;
+/// Two poses whose rotations differ by less than this are one hypothesis (30°: the
+/// starts are at least 90° apart, and ICP from neighbouring starts that reach the same
+/// minimum ends within a few degrees).
+pub const DISTINCT_ROTATION_DEG: f32 = 30.0;
+
+/// Whether `a` and `b` are distinct pose hypotheses ([`DISTINCT_ROTATION_DEG`] apart).
+pub fn distinct(a: &Rigid, b: &Rigid) -> bool {
+    // Rotation angle of aᵀb from its trace, compared as a cosine (no acos).
+    let trace = (a.rotation.transpose() * b.rotation).trace();
+    let cos = (trace - 1.0) * 0.5;
+    cos < libm::cosf(DISTINCT_ROTATION_DEG.to_radians())
+}
+
+/// [`coarse_pose`] in bounded steps (see [`Icp::step`]); the starts run one after the
+/// other, and the best [`CANDIDATES`] distinct results are kept, best first.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CoarsePose {
     start: u8,
+    starts: u8,
     icp: Icp,
-    best: Option<(Rigid, f32)>,
+    ranked: [Option<(Rigid, f32)>; CANDIDATES],
 }
 
 impl CoarsePose {
-    /// Number of starts.
-    pub const STARTS: u8 = 5;
+    /// The identity and the four sign choices of the principal axes (the paper's graph
+    /// model).
+    pub const SIGN_STARTS: u8 = 5;
+    /// [`CoarsePose::SIGN_STARTS`] and the same four with the first two principal axes
+    /// swapped: a chest's lateral and cranial spreads can be close enough for the two
+    /// clouds' axes to come in different orders (the guided model).
+    pub const ALL_STARTS: u8 = 9;
 
-    /// Before the first start; `fs`, `fd` as for [`coarse_pose`].
-    pub fn new(fs: &Frame, fd: &Frame) -> Self {
+    /// Before the first of `starts` (at most [`CoarsePose::ALL_STARTS`]); `fs`, `fd` as
+    /// for [`coarse_pose`].
+    pub fn new(fs: &Frame, fd: &Frame, starts: u8) -> Self {
         CoarsePose {
             start: 0,
+            starts: starts.clamp(1, Self::ALL_STARTS),
             icp: Icp::new(Self::initial(0, fs, fd)),
-            best: None,
+            ranked: [None; CANDIDATES],
         }
     }
 
     /// The initial pose of a start: centroid alignment, then the identity (start 0) or
-    /// the rotation taking `fs`'s axes with signs `(±1, ±1)` onto `fd`'s.
+    /// the rotation taking `fs`'s first two axes (in order for starts 1–4, swapped for
+    /// 5–8) with signs `(±1, ±1)` onto `fd`'s, the third from their cross product.
     fn initial(start: u8, fs: &Frame, fd: &Frame) -> Rigid {
         let rotation = if start == 0 {
             Matrix3::identity()
         } else {
+            let k = start - 1;
             let (s1, s2) = (
-                if start & 1 == 1 { 1.0 } else { -1.0 },
-                if start & 2 == 2 { 1.0 } else { -1.0 },
+                if k & 1 == 1 { 1.0 } else { -1.0 },
+                if k & 2 == 2 { 1.0 } else { -1.0 },
             );
+            let (a, b) = if k & 4 == 4 { (1, 0) } else { (0, 1) };
             let mut axes = fs.axes;
-            axes.set_column(0, &(fs.axes.column(0) * s1));
-            axes.set_column(1, &(fs.axes.column(1) * s2));
+            axes.set_column(0, &(fs.axes.column(a) * s1));
+            axes.set_column(1, &(fs.axes.column(b) * s2));
             let third = axes.column(0).cross(&axes.column(1));
             axes.set_column(2, &third);
             fd.axes * axes.transpose()
@@ -156,26 +183,53 @@ impl CoarsePose {
         fd: &Frame,
         budget: u32,
     ) -> Result<bool> {
-        if self.start >= Self::STARTS {
+        if self.start >= self.starts {
             return Ok(true);
         }
         if !self.icp.step(src, dst, tree, COARSE_ITERATIONS, budget)? {
             return Ok(false);
         }
-        let (pose, rms) = (self.icp.pose(), self.icp.rms());
-        if self.best.is_none_or(|(_, b)| rms < b) {
-            self.best = Some((pose, rms));
-        }
+        self.rank(self.icp.pose(), self.icp.rms());
         self.start += 1;
-        if self.start < Self::STARTS {
+        if self.start < self.starts {
             self.icp = Icp::new(Self::initial(self.start, fs, fd));
         }
-        Ok(self.start >= Self::STARTS)
+        Ok(self.start >= self.starts)
+    }
+
+    /// Enters a start's result into the ranking: it replaces a kept hypothesis it is not
+    /// distinct from if its RMS is lower (else it is dropped), then takes its place by RMS
+    /// (the worst falls off). A NaN RMS ranks last.
+    fn rank(&mut self, pose: Rigid, rms: f32) {
+        let rms = if rms.is_nan() { f32::INFINITY } else { rms };
+        let ranked = &mut self.ranked;
+        if let Some(i) = ranked
+            .iter()
+            .position(|c| c.is_some_and(|(p, _)| !distinct(&p, &pose)))
+        {
+            if ranked[i].is_some_and(|(_, r)| r <= rms) {
+                return;
+            }
+            ranked.copy_within(i + 1.., i);
+            ranked[CANDIDATES - 1] = None;
+        }
+        let Some(at) = ranked.iter().position(|c| c.is_none_or(|(_, r)| rms < r)) else {
+            return;
+        };
+        ranked.copy_within(at..CANDIDATES - 1, at + 1);
+        ranked[at] = Some((pose, rms));
     }
 
     /// The best start's pose and RMS, once all are done.
     pub fn result(&self) -> Option<(Rigid, f32)> {
-        (self.start >= Self::STARTS).then_some(self.best).flatten()
+        self.candidate(0)
+    }
+
+    /// The `k`-th best distinct hypothesis (pose, RMS), once all starts are done.
+    pub fn candidate(&self, k: usize) -> Option<(Rigid, f32)> {
+        (self.start >= self.starts)
+            .then(|| self.ranked.get(k).copied().flatten())
+            .flatten()
     }
 }
 
@@ -404,5 +458,63 @@ mod tests {
         let (a, total) = best_assignment(&cost);
         assert_eq!(&a[..2], &[1, 0]);
         assert!((total - 4.0).abs() < 1e-5);
+    }
+
+    fn yaw(deg: f32) -> Rigid {
+        Rigid {
+            rotation: nalgebra::Rotation3::from_euler_angles(0.0, 0.0, deg.to_radians())
+                .into_inner(),
+            translation: Vec3::zeros(),
+        }
+    }
+
+    /// The ranking keeps the best distinct hypotheses, best first: a pose within
+    /// `DISTINCT_ROTATION_DEG` of a kept one replaces it only with a lower RMS, the worst
+    /// falls off, and NaN ranks last.
+    #[test]
+    fn ranking_keeps_the_best_distinct_poses() {
+        let mut c = CoarsePose::new(&Frame::identity(), &Frame::identity(), 1);
+        let entered = [
+            (0.0, 5.0),
+            (10.0, 4.0),  // same as 0° (10° apart), better: replaces it
+            (90.0, 6.0),  // second for now
+            (180.0, 3.0), // best: 90° falls off
+            (200.0, 7.0), // same as 180°, worse: dropped
+            (270.0, 4.5), // distinct, worse than 10°: falls off
+            (45.0, f32::NAN),
+        ];
+        for (deg, rms) in entered {
+            c.rank(yaw(deg), rms);
+        }
+        c.start = c.starts;
+        let kept: Vec<(f32, f32)> = (0..CANDIDATES)
+            .filter_map(|k| c.candidate(k))
+            .map(|(p, r)| (p.angle_deg().round(), r))
+            .collect();
+        assert_eq!(kept, [(180.0, 3.0), (10.0, 4.0)]);
+        assert!(c.candidate(CANDIDATES).is_none());
+        assert!(!distinct(&yaw(0.0), &yaw(29.0)) && distinct(&yaw(0.0), &yaw(31.0)));
+    }
+
+    /// The swapped-axes starts are proper rotations taking the source's first two axes,
+    /// swapped and signed, onto the destination's.
+    #[test]
+    fn every_start_is_a_proper_rotation() {
+        let fs = Frame {
+            origin: Vec3::new(1.0, 2.0, 3.0),
+            axes: nalgebra::Rotation3::from_euler_angles(0.4, -0.7, 1.1).into_inner(),
+            spread: Vec3::new(3.0, 2.0, 1.0),
+        };
+        let fd = Frame::identity();
+        for start in 0..CoarsePose::ALL_STARTS {
+            let r = CoarsePose::initial(start, &fs, &fd).rotation;
+            assert!((r.determinant() - 1.0).abs() < 1e-5, "start {start}");
+            assert!((r.transpose() * r - Matrix3::identity()).norm() < 1e-5);
+            if start >= 5 {
+                // fs's second axis goes onto fd's first (up to sign).
+                let first = r * fs.axes.column(1);
+                assert!((first.x.abs() - 1.0).abs() < 1e-5, "start {start}");
+            }
+        }
     }
 }

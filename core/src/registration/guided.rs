@@ -12,9 +12,12 @@
 //! The template is labelled, so its ribs are known: each live SOM-1 node takes the label
 //! of the nearest labelled template point. The target's SOM-1 nodes get labels from the
 //! template's:
-//! 1. a rigid pose target → template: the five-start key-point ICP of
-//!    [`crate::registration::endpoints::coarse_pose`] (no initial alignment needed), refined by ICP of
-//!    all target SOM-1 nodes onto the template's;
+//! 1. a rigid pose target → template: the key-point ICP of
+//!    [`crate::registration::endpoints::CoarsePose`] from nine starts (no initial
+//!    alignment needed) keeps its best [`CANDIDATES`] distinct poses; each is refined by
+//!    ICP of all target SOM-1 nodes onto the template's, and the lowest refined RMS wins
+//!    ([`PoseConfidence`]: a flipped pose pairs the nodes with the wrong cartilage, and
+//!    its residual stays well above the right one's);
 //! 2. the template nodes are carried into the target frame (first by that pose, in later
 //!    rounds by the current local-rigid mapping) and every target node takes the label of
 //!    the nearest carried template node within [`LABEL_RADIUS_MM`] (farther nodes, e.g.
@@ -36,7 +39,7 @@ use crate::math::fit::{equal_steps, PolyFit};
 use crate::math::geom::{Frame, Rigid};
 use crate::math::kabsch;
 use crate::math::kdtree::KdTree;
-use crate::registration::endpoints::{CoarsePose, Icp, IcpTree};
+use crate::registration::endpoints::{distinct, CoarsePose, Icp, IcpTree, CANDIDATES};
 use crate::registration::local_rigid::{LocalRigid, Lookup, TransformCache};
 use crate::registration::skeleton::SkeletonGraph;
 use crate::Vec3;
@@ -47,6 +50,18 @@ pub const LABEL_RADIUS_MM: f32 = 12.0;
 pub const GUIDED_ROUNDS: usize = 3;
 /// ICP rounds refining the coarse pose on all SOM-1 nodes.
 pub const REFINE_ITERATIONS: usize = 10;
+/// Largest residual of the winning pose hypothesis a registration is accepted with, mm
+/// ([`PoseConfidence::check`]). Measured with `ribreg eval --robustness --ours-only
+/// --pairs 20` (640 runs): the 519 complete-coverage runs that came out right end at
+/// 2.8–4.9 mm; the one complete run that came out wrong (phantom 13 thinned to 30 %,
+/// refused as not seen) at 8.6 mm. 7 mm sits between, with room for noisier sweeps.
+pub const MAX_POSE_RESIDUAL_MM: f32 = 7.0;
+/// Least ratio of the runner-up hypothesis's residual to the winner's
+/// ([`PoseConfidence::check`]). Same sweep: every run that came out right has a ratio of
+/// at least 1.62 (phantom 12 turned by 180°, whose flipped pose ends at 5.8 mm against
+/// the right one's 3.6 mm); 1.0 would be a coin toss. 1.25 refuses a pose that a flip
+/// fits within a quarter of the residual.
+pub const MIN_POSE_MARGIN: f32 = 1.25;
 /// Fewest points a rib needs for its curve.
 pub const MIN_RIB_POINTS: usize = 8;
 /// Least span of a target rib on each side of the sternum, as a share of the template's
@@ -298,6 +313,67 @@ fn percent(share: f32) -> u8 {
     (share * 100.0 + 0.5) as u8
 }
 
+/// How clearly the target's pose was found: the refining ICP's residual of the winning
+/// hypothesis and of the best one distinct from it ([`TargetSkeleton`], step 1).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PoseConfidence {
+    /// RMS distance (mm) of the target's SOM-1 nodes to the template's nearest after the
+    /// refining ICP, for the pose taken.
+    pub residual_mm: f32,
+    /// The same for the best hypothesis whose rotation differs by at least
+    /// [`crate::registration::endpoints::DISTINCT_ROTATION_DEG`] (infinite if none).
+    pub runner_up_mm: f32,
+    /// Hypotheses refined (1..=[`CANDIDATES`]).
+    pub hypotheses: u8,
+}
+
+impl PoseConfidence {
+    /// The lowest-residual pose of `refined` and its confidence (`None` if empty).
+    pub fn choose(refined: &[Option<(Rigid, f32)>]) -> Option<(Rigid, PoseConfidence)> {
+        let rms = |r: f32| if r.is_nan() { f32::INFINITY } else { r };
+        let live = || refined.iter().flatten();
+        let (pose, best) = live().fold(None, |acc: Option<(Rigid, f32)>, &(p, r)| match acc {
+            Some((_, b)) if b <= rms(r) => acc,
+            _ => Some((p, rms(r))),
+        })?;
+        let runner_up = live()
+            .filter(|(p, _)| distinct(p, &pose))
+            .map(|&(_, r)| rms(r))
+            .fold(f32::INFINITY, f32::min);
+        Some((
+            pose,
+            PoseConfidence {
+                residual_mm: best,
+                runner_up_mm: runner_up,
+                hypotheses: live().count() as u8,
+            },
+        ))
+    }
+
+    /// Runner-up residual over the winner's (infinite when there is no runner-up).
+    pub fn margin(&self) -> f32 {
+        self.runner_up_mm / self.residual_mm
+    }
+
+    /// Refuses a pose that a correct registration would not end with: a residual above
+    /// [`MAX_POSE_RESIDUAL_MM`], or a runner-up within [`MIN_POSE_MARGIN`] of it
+    /// ([`Error::Ambiguous`]).
+    pub fn check(&self) -> Result<()> {
+        let fits = self.residual_mm <= MAX_POSE_RESIDUAL_MM;
+        let clear = self.margin() >= MIN_POSE_MARGIN;
+        if fits && clear {
+            return Ok(());
+        }
+        let tenths = |mm: f32| (mm * 10.0 + 0.5) as u16;
+        Err(Error::Ambiguous {
+            residual_dmm: tenths(self.residual_mm),
+            runner_up_dmm: tenths(self.runner_up_mm),
+            max_residual_dmm: tenths(MAX_POSE_RESIDUAL_MM),
+            min_margin_percent: percent(MIN_POSE_MARGIN),
+        })
+    }
+}
+
 /// Where a [`TargetSkeleton`] is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum GuidedStage {
@@ -341,6 +417,10 @@ pub struct TargetSkeleton {
     carried_tree: NodeTree,
     coarse: CoarsePose,
     icp: Icp,
+    /// The coarse hypothesis being refined, and each one's refined pose and RMS.
+    hypothesis: u8,
+    refined: [Option<(Rigid, f32)>; CANDIDATES],
+    confidence: Option<PoseConfidence>,
     pose: Rigid,
     carried: heapless::Vec<Vec3, SOM1_CAPACITY>,
     labels: NodeLabels,
@@ -381,8 +461,11 @@ impl TargetSkeleton {
             template_tree: IcpTree::new(),
             target_tree: NodeTree::new(),
             carried_tree: NodeTree::new(),
-            coarse: CoarsePose::new(&Frame::identity(), &Frame::identity()),
+            coarse: CoarsePose::new(&Frame::identity(), &Frame::identity(), 1),
             icp: Icp::new(Rigid::identity()),
+            hypothesis: 0,
+            refined: [None; CANDIDATES],
+            confidence: None,
             pose: Rigid::identity(),
             carried: heapless::Vec::new(),
             labels: NodeLabels::new(),
@@ -411,8 +494,11 @@ impl TargetSkeleton {
         self.template_tree.start(template.som1.len())?;
         self.target_tree.start(target.som1.len())?;
         self.carried_tree.start(0)?;
-        self.coarse = CoarsePose::new(&target.frame, &template.frame);
+        self.coarse = CoarsePose::new(&target.frame, &template.frame, CoarsePose::ALL_STARTS);
         self.icp = Icp::new(Rigid::identity());
+        self.hypothesis = 0;
+        self.refined = [None; CANDIDATES];
+        self.confidence = None;
         self.pose = Rigid::identity();
         self.carried.clear();
         self.ribs = None;
@@ -425,6 +511,11 @@ impl TargetSkeleton {
     /// The current stage.
     pub fn stage(&self) -> GuidedStage {
         self.stage
+    }
+
+    /// How clearly the refined pose hypotheses picked the pose, once they are done.
+    pub fn confidence(&self) -> Option<PoseConfidence> {
+        self.confidence
     }
 
     /// The rigid pose target → template (the last fitting frame) and the 30 target
@@ -474,6 +565,8 @@ impl TargetSkeleton {
                 )? {
                     let (coarse, _) = self.coarse.result().ok_or(Error::RigidFit)?;
                     self.icp = Icp::new(coarse);
+                    self.hypothesis = 0;
+                    self.refined = [None; CANDIDATES];
                     self.stage = GuidedStage::Refine;
                 }
             }
@@ -485,7 +578,19 @@ impl TargetSkeleton {
                     REFINE_ITERATIONS,
                     queries as u32,
                 )? {
-                    self.pose = self.icp.pose();
+                    let h = usize::from(self.hypothesis);
+                    if let Some(slot) = self.refined.get_mut(h) {
+                        *slot = Some((self.icp.pose(), self.icp.rms()));
+                    }
+                    self.hypothesis += 1;
+                    if let Some((next, _)) = self.coarse.candidate(h + 1) {
+                        self.icp = Icp::new(next);
+                        return Ok(false);
+                    }
+                    let (pose, confidence) =
+                        PoseConfidence::choose(&self.refined).ok_or(Error::RigidFit)?;
+                    self.confidence = Some(confidence);
+                    self.pose = pose;
                     let inverse = self.pose.inverse();
                     self.carried.clear();
                     for p in &template.som1 {
@@ -671,5 +776,56 @@ mod tests {
             check_coverage(&template, &split, &target, &to_fit),
             Err(Error::NotSeen { rib: 4, .. })
         ));
+    }
+
+    fn turned(deg: f32) -> Rigid {
+        Rigid {
+            rotation: nalgebra::Rotation3::from_euler_angles(0.0, 0.0, deg.to_radians())
+                .into_inner(),
+            translation: Vec3::new(deg, 0.0, 0.0),
+        }
+    }
+
+    /// The lowest residual wins; the runner-up is the best *distinct* pose (a near copy of
+    /// the winner is no competitor); the check refuses a loose fit or a close runner-up.
+    #[test]
+    fn the_lowest_residual_wins_and_a_close_distinct_runner_up_is_ambiguous() {
+        let refined = [
+            Some((turned(180.0), 5.8)),
+            Some((turned(5.0), 3.5)),
+            Some((turned(0.0), 3.6)), // same pose as 5°: not the runner-up
+        ];
+        let (pose, c) = PoseConfidence::choose(&refined).unwrap();
+        assert_eq!(pose, turned(5.0));
+        assert_eq!((c.residual_mm, c.runner_up_mm, c.hypotheses), (3.5, 5.8, 3));
+        assert!(c.check().is_ok());
+
+        let close = [Some((turned(0.0), 4.0)), Some((turned(180.0), 4.4)), None];
+        let (_, c) = PoseConfidence::choose(&close).unwrap();
+        let e = c.check().unwrap_err();
+        assert_eq!(
+            e,
+            Error::Ambiguous {
+                residual_dmm: 40,
+                runner_up_dmm: 44,
+                max_residual_dmm: 70,
+                min_margin_percent: 125,
+            }
+        );
+        assert!(e.to_string().contains("ambiguous"), "{e}");
+
+        // A loose fit is refused even without a competitor; NaN counts as no fit.
+        let (_, c) = PoseConfidence::choose(&[Some((turned(0.0), 9.0))]).unwrap();
+        assert_eq!(c.runner_up_mm, f32::INFINITY);
+        assert!(matches!(
+            c.check(),
+            Err(Error::Ambiguous {
+                residual_dmm: 90,
+                ..
+            })
+        ));
+        let (_, c) = PoseConfidence::choose(&[Some((turned(0.0), f32::NAN))]).unwrap();
+        assert!(c.check().is_err());
+        assert!(PoseConfidence::choose(&[None, None]).is_none());
     }
 }

@@ -7,7 +7,7 @@ use crate::limits::{MAX_CLOUD_POINTS, MIN_CLOUD_POINTS};
 use crate::math::geom::{nearest, validate, Frame, Rigid};
 use crate::registration::endpoints::{match_endpoints, EndpointMatch};
 use crate::registration::guided::{
-    check_coverage, fit_ribs, label_nodes, GuidedStage, NodeLabels, TargetSkeleton,
+    check_coverage, fit_ribs, label_nodes, GuidedStage, NodeLabels, PoseConfidence, TargetSkeleton,
 };
 use crate::registration::local_rigid::LocalRigid;
 use crate::registration::skeleton::{GraphBuild, RibEnds, RibSkeleton, SkeletonGraph};
@@ -166,6 +166,9 @@ pub struct Registration {
     pub skeleton: RibSkeleton,
     /// The mapping template → target.
     pub map: LocalRigid,
+    /// Guided model: how clearly the pose hypotheses picked the pose (`None` for the
+    /// graph model).
+    pub confidence: Option<PoseConfidence>,
 }
 
 /// Registers `template` onto the `target` cloud (any pose: no initial alignment needed).
@@ -333,21 +336,28 @@ impl Registering {
             return Err(Error::Config("the guided rib model did not finish"));
         };
         let (pose, points) = run.result().ok_or(Error::RigidFit)?;
+        let confidence = run.confidence();
         // A sweep that misses a side or a rib is refused, not mapped from the wrong
-        // cartilage.
+        // cartilage; then a pose that a distinct one fits nearly as well (checked second:
+        // a one-sided sweep is also ambiguous, and "not seen" says what to rescan).
         check_coverage(
             &template.skeleton.points,
             &template.midline_fraction,
             &points,
             &pose,
         )?;
+        if let Some(c) = confidence {
+            c.check()?;
+        }
         let skeleton = RibSkeleton {
             points,
             paths: Default::default(),
             degree: [3; 4],
         };
         let graph = core::mem::replace(graph, SkeletonGraph::empty());
-        self.stage = Stage::Done(finish(template, graph, pose, None, skeleton, cfg)?);
+        let mut registration = finish(template, graph, pose, None, skeleton, cfg)?;
+        registration.confidence = confidence;
+        self.stage = Stage::Done(registration);
         Ok(())
     }
 
@@ -403,5 +413,6 @@ fn finish(
         matching,
         skeleton,
         map,
+        confidence: None,
     })
 }

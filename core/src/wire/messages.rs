@@ -363,6 +363,48 @@ pub(super) const fn max(a: usize, b: usize) -> usize {
     }
 }
 
+/// What an [`error_code`] stands for, in a few words (the code travels without the
+/// error's fields); `"unknown error"` for a code no error has.
+pub fn error_summary(code: u8) -> &'static str {
+    match code {
+        1 => "too few points",
+        2 => "too many points",
+        3 => "a coordinate is not finite",
+        4 => "a coordinate is out of range",
+        5 => "the cloud is degenerate (flat, a line or a point)",
+        6 => "the labels do not match the points",
+        7 => "the rib endpoints were not found",
+        8 => "the rib order is inconsistent",
+        9 => "a rib path was not found",
+        10 => "a rigid fit failed",
+        11 => "a capacity was exceeded",
+        12 => "invalid configuration or state",
+        13 => "too few calibration samples",
+        14 => "an invalid calibration sample",
+        15 => "the calibration motion is too small",
+        16 => "the temporal calibration did not correlate",
+        17 => "a frame lies outside the tracked poses",
+        18 => "a gap in the tracked poses",
+        19 => "a pixel outside the image",
+        20 => "a rib side was not seen in the sweep (scan it and register again)",
+        21 => "the target's pose is ambiguous (scan more of both sides and register again)",
+        _ => "unknown error",
+    }
+}
+
+impl core::fmt::Display for Fault {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Fault::PoseTimeout => f.write_str("robot poses stopped while executing"),
+            Fault::Registration(code) => write!(
+                f,
+                "registration refused: {} (error code {code})",
+                error_summary(*code)
+            ),
+        }
+    }
+}
+
 /// A compact code for a core error (for NACKs and faults): its variant's position.
 pub fn error_code(e: &crate::error::Error) -> u8 {
     use crate::error::Error as E;
@@ -387,5 +429,6 @@ pub fn error_code(e: &crate::error::Error) -> u8 {
         E::TrackGap { .. } => 18,
         E::Pixel { .. } => 19,
         E::NotSeen { .. } => 20,
+        E::Ambiguous { .. } => 21,
     }
 }

@@ -316,7 +316,7 @@ pub fn run_with<P: Port>(
             match m {
                 FromController::Waypoint(w) => mapped.push(w),
                 FromController::Fault(f) => {
-                    return Err(CliError::Link(format!("controller fault: {f:?}")))
+                    return Err(CliError::Link(format!("controller fault: {f}")))
                 }
                 _ => {}
             }
@@ -358,7 +358,7 @@ pub fn run_with<P: Port>(
                     pose_timeouts += 1;
                     progress("controller: robot poses stopped, setpoints stopped");
                 }
-                FromController::Fault(f) => progress(&format!("controller fault: {f:?}")),
+                FromController::Fault(f) => progress(&format!("controller fault: {f}")),
                 _ => {}
             }
         }
