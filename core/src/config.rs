@@ -34,6 +34,12 @@ pub struct Config {
     pub neighbours: usize,
     /// How rib points are found (improvement option; paper: [`RibModel::Graph`]).
     pub rib_model: RibModel,
+    /// Guided model, optional prior: the direction the patient's anterior (the chest's
+    /// front) points to in the target's frame, roughly (a robot PC that knows where the
+    /// bed is: supine under a ceiling-mounted robot, the base's up). Pose hypotheses
+    /// more than [`crate::registration::endpoints::PRIOR_CONE_DEG`] from it are not
+    /// considered. `None`: no prior, any pose.
+    pub target_up: Option<crate::Vec3>,
 }
 
 impl Default for Config {
@@ -44,6 +50,7 @@ impl Default for Config {
             turn_angle_deg: TURN_ANGLE_DEG,
             neighbours: NEIGHBOURS,
             rib_model: RibModel::Graph,
+            target_up: None,
         }
     }
 }

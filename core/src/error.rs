@@ -199,6 +199,15 @@ pub enum Error {
         /// Least accepted, percent.
         min_percent: u8,
     },
+    /// No pose hypothesis agrees with the target's up prior
+    /// ([`crate::config::Config::target_up`]): the closest turned it this far from the
+    /// template's anterior axis.
+    AgainstPrior {
+        /// The closest hypothesis's angle, degrees.
+        closest_deg: u8,
+        /// The largest accepted, degrees.
+        cone_deg: u8,
+    },
     /// The target's pose is not clear (guided model; see
     /// [`crate::registration::guided::PoseConfidence::check`]): the best pose hypothesis
     /// fits too loosely, or a distinct one fits nearly as well. A sweep of something else,
@@ -331,6 +340,12 @@ impl fmt::Display for Error {
                 "rib {rib} not seen on the patient's {side}: the target's rib spans {percent} % \
                  of the template's there, at least {min_percent} % is needed (did the sweep \
                  miss that side or that rib? scan it and register again)"
+            ),
+            Error::AgainstPrior { closest_deg, cone_deg } => write!(
+                f,
+                "no pose of the target agrees with its up prior: the closest turns it \
+                 {closest_deg}° from the patient's anterior, at most {cone_deg}° accepted (is the \
+                 prior right? register without it)"
             ),
             Error::Ambiguous {
                 residual_dmm,

@@ -51,6 +51,36 @@ impl Method {
     }
 }
 
+/// How to register: the method and its options. A [`Method`] alone is its defaults (no
+/// orientation prior).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Options {
+    /// The method.
+    pub method: Method,
+    /// Improved method: the patient's anterior direction in the target's frame, roughly
+    /// (`register --target-up X,Y,Z`; see `Config::target_up`).
+    pub target_up: Option<Vec3>,
+}
+
+impl From<Method> for Options {
+    fn from(method: Method) -> Self {
+        Options {
+            method,
+            ..Options::default()
+        }
+    }
+}
+
+impl Options {
+    /// The core configuration.
+    pub fn config(&self) -> Config {
+        Config {
+            target_up: self.target_up,
+            ..self.method.config()
+        }
+    }
+}
+
 /// Transform cache capacity on the host (distinct 10-neighbour sets kept).
 pub const HOST_CACHE: usize = 1024;
 
@@ -87,6 +117,28 @@ pub struct RegisterJob {
     /// `paper`: as published; `improved`: guided ribs + anterior template (needs labels).
     #[arg(long, value_enum, default_value_t = Method::Improved)]
     pub method: Method,
+    /// Improved method, optional: the patient's anterior (the chest's front) as a
+    /// direction `X,Y,Z` in the target's frame, roughly — e.g. `0,0,1` for a supine
+    /// patient under a robot whose base z points up. Poses that turn it more than 60° from
+    /// the template's anterior are not considered. Default: none, any pose.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_direction, allow_hyphen_values = true)]
+    pub target_up: Option<Vec3>,
+}
+
+/// `X,Y,Z`: three finite numbers, not all zero.
+fn parse_direction(text: &str) -> Result<Vec3, String> {
+    let v: Vec<f32> = text
+        .split(',')
+        .map(|t| t.trim().parse::<f32>().map_err(|e| format!("{t:?}: {e}")))
+        .collect::<Result<_, _>>()?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) && (x, y, z) != (0.0, 0.0, 0.0) => {
+            Ok(Vec3::new(x, y, z))
+        }
+        _ => Err(format!(
+            "{text:?}: expected a direction X,Y,Z (three finite numbers, not all zero)"
+        )),
+    }
 }
 
 pub use crate::error::CliError;
@@ -206,9 +258,11 @@ pub fn register_clouds(
     labels: Option<&[u8]>,
     target: &[Vec3],
     waypoints: Option<&[Vec3]>,
-    method: Method,
+    how: impl Into<Options>,
     progress: &mut dyn FnMut(&str),
 ) -> Result<RegisterOutcome, Error> {
+    let how = how.into();
+    let method = how.method;
     let t0 = Instant::now();
     let tpl = build_template(template, labels, method, progress)?;
     let t_template = t0.elapsed();
@@ -224,7 +278,7 @@ pub fn register_clouds(
         labels.is_some(),
         target,
         waypoints,
-        method,
+        how,
         t_template,
         progress,
     )
@@ -241,11 +295,13 @@ pub fn register_prepared(
     labelled: bool,
     target: &[Vec3],
     waypoints: Option<&[Vec3]>,
-    method: Method,
+    how: impl Into<Options>,
     t_template: std::time::Duration,
     progress: &mut dyn FnMut(&str),
 ) -> Result<RegisterOutcome, Error> {
-    let cfg = &method.config();
+    let how = how.into();
+    let method = how.method;
+    let cfg = &how.config();
     let t1 = Instant::now();
     let reg = register(&tpl, target, cfg)?;
     let t_register = t1.elapsed();
@@ -491,6 +547,15 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
              use --method paper for an unlabelled one",
         ));
     }
+    let how = Options {
+        method: job.method,
+        target_up: job.target_up,
+    };
+    if job.method == Method::Paper && job.target_up.is_some() {
+        return Err(CliError::Usage(
+            "--target-up needs the improved method (the paper's has no pose hypotheses)".into(),
+        ));
+    }
     let mut outcome = match prepared {
         Some(prepared) => {
             progress(&format!(
@@ -503,19 +568,12 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
                 true,
                 &tgt,
                 wps.as_deref(),
-                job.method,
+                how,
                 std::time::Duration::ZERO,
                 progress,
             )?
         }
-        None => register_clouds(
-            &tpl,
-            labels.as_deref(),
-            &tgt,
-            wps.as_deref(),
-            job.method,
-            progress,
-        )?,
+        None => register_clouds(&tpl, labels.as_deref(), &tgt, wps.as_deref(), how, progress)?,
     };
     let t1 = Instant::now();
     let mut written: Vec<&Path> = Vec::new();

@@ -129,3 +129,41 @@ fn a_missing_serial_device_is_one_clear_error() {
         "{err}"
     );
 }
+
+/// The robot PC's orientation prior reaches the controller's registration: the true
+/// anterior gives the same waypoints as none; one at a right angle to it is refused with
+/// a registration fault that says so, and nothing is executed.
+#[test]
+fn the_configured_orientation_prior_is_used_and_a_wrong_one_refused() {
+    let free = run(None, RunOptions::default());
+    let pose = ribreg_sim::sweep::simulate(&PhantomConfig::default(), &RunOptions::quick().sweep)
+        .unwrap()
+        .pair
+        .pose;
+    let up = pose.apply_vector([0.0, 0.0, 1.0]).map(|v| v as f32);
+    let with = run(
+        None,
+        RunOptions {
+            target_up: Some(up),
+            ..RunOptions::default()
+        },
+    );
+    let mapped = |r: &HilReport| r.waypoints.iter().map(|w| w.mapped).collect::<Vec<_>>();
+    assert_eq!(mapped(&with), mapped(&free));
+    let side = pose.apply_vector([1.0, 0.0, 0.0]).map(|v| v as f32);
+    let e = hil::run_with(
+        &mut Session::new(InProcess::new()),
+        &PhantomConfig::default(),
+        RunOptions {
+            target_up: Some(side),
+            ..RunOptions::quick()
+        },
+        &mut |_| {},
+    )
+    .unwrap_err();
+    let text = e.to_string();
+    assert!(
+        text.contains("no pose agrees with the configured patient orientation"),
+        "{text}"
+    );
+}

@@ -7,22 +7,24 @@ use ribreg_core::error::Cloud;
 use ribreg_core::Error;
 use ribreg_sim::eval::robustness::{Case, SILENT_FAILURE_MM};
 use ribreg_sim::phantom::{PhantomConfig, PhantomPair, Side, Variant};
-use ribreg_sim::register::{register_clouds, to_core, Method};
+use ribreg_sim::register::{register_clouds, to_core, Method, Options};
 
 /// The improved method on `pair`: the largest waypoint error, or the core's refusal.
 fn run(pair: &PhantomPair) -> Result<f64, Error> {
+    run_with(pair, None)
+}
+
+/// [`run`] with an up prior (`register --target-up`).
+fn run_with(pair: &PhantomPair, target_up: Option<[f64; 3]>) -> Result<f64, Error> {
+    let how = Options {
+        method: Method::Improved,
+        target_up: target_up.map(|u| ribreg_core::Vec3::new(u[0] as f32, u[1] as f32, u[2] as f32)),
+    };
     let tpl = to_core(&pair.template.points, Cloud::Template).unwrap();
     let tgt = to_core(&pair.target, Cloud::Target).unwrap();
     let wps = to_core(&pair.template_waypoints, Cloud::Query).unwrap();
     let labels: Vec<u8> = pair.template.labels.iter().map(|&l| l as u8).collect();
-    match register_clouds(
-        &tpl,
-        Some(&labels),
-        &tgt,
-        Some(&wps),
-        Method::Improved,
-        &mut |_| (),
-    ) {
+    match register_clouds(&tpl, Some(&labels), &tgt, Some(&wps), how, &mut |_| ()) {
         Ok(o) => Ok(o
             .waypoints
             .unwrap()
@@ -128,4 +130,43 @@ fn a_sweep_of_something_else_is_refused() {
         .collect();
     let e = run(&q).expect_err("a bowl registered as a chest");
     assert!(matches!(e, Error::Ambiguous { .. }), "{e}");
+}
+
+/// The optional up prior: the patient's true anterior (turned with the sweep), or one
+/// roughly like it, gives the same registration as none; a prior 90° or 180° off is
+/// refused, never followed onto a wrong pose.
+#[test]
+fn an_up_prior_narrows_the_search_and_a_wrong_one_is_refused() {
+    for seed in [0, 12] {
+        let p = pair(seed);
+        for case in [Case::Yaw(90), Case::Rotation(2)] {
+            let q = case.apply(&p, seed);
+            let up = q.pose.apply_vector([0.0, 0.0, 1.0]);
+            let free = run(&q).unwrap();
+            assert_eq!(
+                run_with(&q, Some(up)).unwrap(),
+                free,
+                "seed {seed}, {}",
+                case.name()
+            );
+            // About 27° off: still within the cone.
+            let rough = [up[0] + 0.4, up[1] - 0.3, up[2]];
+            assert_eq!(run_with(&q, Some(rough)).unwrap(), free);
+            let side = q.pose.apply_vector([1.0, 0.0, 0.0]);
+            let down = [-up[0], -up[1], -up[2]];
+            for wrong in [side, down] {
+                let e = run_with(&q, Some(wrong)).unwrap_err();
+                assert!(
+                    matches!(
+                        e,
+                        Error::AgainstPrior { .. }
+                            | Error::Ambiguous { .. }
+                            | Error::NotSeen { .. }
+                    ),
+                    "seed {seed}, {}: {e}",
+                    case.name()
+                );
+            }
+        }
+    }
 }

@@ -51,7 +51,7 @@ SCRIPT = "tests/golden/gen_wire.py"
 OUT = os.path.join("tests", "fixtures", "golden", "wire.json")
 
 MAGIC = int.from_bytes(b"RBRG", "little")  # 0x47524252
-VERSION = 1
+VERSION = 2
 
 # ---------------------------------------------------------------- primitives
 
@@ -150,7 +150,7 @@ RIGID_W = Array(F32, 12)
 PROBE_W = Struct(("width_px", U16), ("height_px", U16), ("footprint_mm", F32), ("depth_mm", F32))
 CONFIGURE = Struct(("probe", PROBE_W), ("tcp_t_us", RIGID_W), ("ee_t_tcp", RIGID_W), ("lag_us", I32),
                    ("voxel_mm", F32), ("max_speed_mm_s", F32), ("max_accel_mm_s2", F32),
-                   ("standoff_mm", F32))
+                   ("standoff_mm", F32), ("target_up", P3))
 NODE = Struct(("p", P3), ("label", U8))
 TEMPLATE_SHAPE = Struct(("origin", P3), ("axes", Array(F32, 9)), ("spread", P3),
                         ("skeleton", Array(P3, 30)), ("midline_fraction", Array(F32, 4)))
@@ -414,20 +414,23 @@ def cases():
                        "tcp_t_us": tcp[:9] + [f32(12.5), f32(-3.25), f32(145.0)],
                        "ee_t_tcp": rot_z(30.0) + [ONE_E_MINUS_7, -0.0, f32(210.75)],
                        "lag_us": -268000, "voxel_mm": f32(2.0), "max_speed_mm_s": f32(20.0),
-                       "max_accel_mm_s2": f32(100.0), "standoff_mm": f32(5.0)}})
+                       "max_accel_mm_s2": f32(100.0), "standoff_mm": f32(5.0),
+                       "target_up": [f32(0.0), f32(0.25), f32(-1.0)]}})
     add("configure_extremes", "lag i32::MIN, f32::MAX, smallest normal and subnormal f32", to, 2,
         {"Configure": {"probe": {"width_px": U16_MAX, "height_px": 0, "footprint_mm": F32_MAX,
                                  "depth_mm": F32_MIN_SUBNORMAL},
                        "tcp_t_us": [F32_MIN_POSITIVE, -F32_MIN_POSITIVE, -F32_MAX] + [0.0] * 9,
                        "ee_t_tcp": [-0.0] * 12,
                        "lag_us": -(2**31), "voxel_mm": ONE_E_MINUS_7, "max_speed_mm_s": -ONE_E_MINUS_7,
-                       "max_accel_mm_s2": -F32_MIN_SUBNORMAL, "standoff_mm": f32(1e30)}})
+                       "max_accel_mm_s2": -F32_MIN_SUBNORMAL, "standoff_mm": f32(1e30),
+                       "target_up": [F32_MAX, -0.0, F32_MIN_SUBNORMAL]}})
     add("configure_lag_max", "lag i32::MAX", to, 3,
         {"Configure": {"probe": {"width_px": 640, "height_px": 512, "footprint_mm": f32(50.0),
                                  "depth_mm": f32(80.0)},
                        "tcp_t_us": rot_z(-45.0) + p3(), "ee_t_tcp": rot_z(180.0) + p3(),
                        "lag_us": 2**31 - 1, "voxel_mm": f32(1.5), "max_speed_mm_s": f32(35.5),
-                       "max_accel_mm_s2": f32(250.0), "standoff_mm": f32(0.0)}})
+                       "max_accel_mm_s2": f32(250.0), "standoff_mm": f32(0.0),
+                       "target_up": [0.0, 0.0, 0.0]}})
     g = random.Random(11)
     nodes = [{"p": p3(-150.0, 150.0), "label": g.randrange(0, 6)} for _ in range(32)]
     nodes[0]["label"], nodes[1]["label"] = 0, 5

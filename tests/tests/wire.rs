@@ -472,19 +472,23 @@ fn to_controller() -> BoxedStrategy<ToController> {
         prop::array::uniform12(f32s()),
         i32s(),
         prop::array::uniform4(f32s()),
+        p3(),
     )
-        .prop_map(|(probe, tcp_t_us, ee_t_tcp, lag_us, [v, s, a, d])| {
-            ToController::Configure(Configure {
-                probe,
-                tcp_t_us,
-                ee_t_tcp,
-                lag_us,
-                voxel_mm: v,
-                max_speed_mm_s: s,
-                max_accel_mm_s2: a,
-                standoff_mm: d,
-            })
-        });
+        .prop_map(
+            |(probe, tcp_t_us, ee_t_tcp, lag_us, [v, s, a, d], target_up)| {
+                ToController::Configure(Configure {
+                    probe,
+                    tcp_t_us,
+                    ee_t_tcp,
+                    lag_us,
+                    voxel_mm: v,
+                    max_speed_mm_s: s,
+                    max_accel_mm_s2: a,
+                    standoff_mm: d,
+                    target_up,
+                })
+            },
+        );
     let node = (p3(), any::<u8>()).prop_map(|(p, label)| Node { p, label });
     let nodes = (u16s(), u16s(), vec(node, 0..=NODES_PER_CHUNK)).prop_map(|(offset, total, n)| {
         ToController::TemplateNodes {
@@ -925,11 +929,11 @@ fn corrupted_frames_are_refused() {
 fn error_codes_have_summaries() {
     use ribreg_core::error::Side;
     use ribreg_core::Error;
-    for code in 1..=21 {
+    for code in 1..=22 {
         assert_ne!(wire::error_summary(code), "unknown error", "code {code}");
     }
     assert_eq!(wire::error_summary(0), "unknown error");
-    assert_eq!(wire::error_summary(22), "unknown error");
+    assert_eq!(wire::error_summary(23), "unknown error");
     let not_seen = Error::NotSeen {
         rib: 5,
         side: Side::Right,

@@ -225,6 +225,7 @@ mod link_tests {
             max_speed_mm_s: 10.0,
             max_accel_mm_s2: 10.0,
             standoff_mm: 10.0,
+            target_up: [0.0; 3],
         });
         assert!(matches!(
             feed(&mut c, 1, &bad)[..],

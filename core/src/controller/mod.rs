@@ -105,6 +105,7 @@ struct Settings {
     max_speed: f32,
     max_accel: f32,
     standoff: f32,
+    target_up: Option<Vec3>,
 }
 
 /// The controller (see the module docs). `VOXELS` is the compounding cloud's capacity.
@@ -530,7 +531,11 @@ impl<const VOXELS: usize> Controller<VOXELS> {
 
     #[inline(never)]
     fn register_step(&mut self) {
-        let cfg = Config::improved();
+        // The same at every step: a configuration is accepted only before registering.
+        let cfg = Config {
+            target_up: self.settings.as_ref().and_then(|s| s.target_up),
+            ..Config::improved()
+        };
         if self.registering.is_none() {
             // First the queued sweep points, then the voxel centroids, then the
             // registration's set-up, each in calls of their own.
@@ -659,6 +664,10 @@ fn settings(c: &Configure) -> Result<Settings> {
     if c.lag_us.unsigned_abs() > 10_000_000 {
         return Err(Error::Config("lag must be within ±10 s"));
     }
+    let up = Vec3::from(c.target_up);
+    if !up.iter().all(|v| v.is_finite() && v.abs() <= 1e6) {
+        return Err(Error::Config("the patient's up direction must be finite"));
+    }
     Ok(Settings {
         calibration,
         lag_s: f64::from(c.lag_us) * 1e-6,
@@ -666,6 +675,8 @@ fn settings(c: &Configure) -> Result<Settings> {
         max_speed: c.max_speed_mm_s,
         max_accel: c.max_accel_mm_s2,
         standoff: c.standoff_mm,
+        // Zero: no prior (a direction too short to normalise is none, too).
+        target_up: up.try_normalize(1e-6),
     })
 }
 
@@ -739,6 +750,7 @@ mod fuzz_tests {
                 max_speed_mm_s: f(rng),
                 max_accel_mm_s2: f(rng),
                 standoff_mm: f(rng),
+                target_up: p(rng),
             }),
             2 => {
                 let mut nodes = heapless::Vec::new();

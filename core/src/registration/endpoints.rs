@@ -94,7 +94,7 @@ pub fn match_endpoints(
 /// their relative pose; `fs`, `fd` are their principal axes. Returns the pose and RMS.
 pub fn coarse_pose(src: &[Vec3], fs: &Frame, dst: &[Vec3], fd: &Frame) -> Result<(Rigid, f32)> {
     let tree = IcpTree::build(dst)?;
-    let mut run = CoarsePose::new(fs, fd, CoarsePose::SIGN_STARTS);
+    let mut run = CoarsePose::new(fs, fd, CoarsePose::SIGN_STARTS, None);
     while !run.step(src, fs, dst, &tree, fd, u32::MAX)? {}
     // Note: `step` returns `true` only after the last start, which sets the result.
     run.result().ok_or(crate::error::Error::RigidFit)
@@ -106,6 +106,12 @@ pub const CANDIDATES: usize = 2;
 /// starts are at least 90° apart, and ICP from neighbouring starts that reach the same
 /// minimum ends within a few degrees).
 pub const DISTINCT_ROTATION_DEG: f32 = 30.0;
+
+/// A pose hypothesis is considered only if it turns the target's up prior
+/// ([`crate::config::Config::target_up`]) within this angle of the template's anterior
+/// axis (+z): 60°, room for a tilted bed or a rough guess, none for a flip (180°) or a
+/// quarter turn about a lateral or cranial axis (90°).
+pub const PRIOR_CONE_DEG: f32 = 60.0;
 
 /// Whether `a` and `b` are distinct pose hypotheses ([`DISTINCT_ROTATION_DEG`] apart).
 pub fn distinct(a: &Rigid, b: &Rigid) -> bool {
@@ -123,6 +129,10 @@ pub struct CoarsePose {
     starts: u8,
     icp: Icp,
     ranked: [Option<(Rigid, f32)>; CANDIDATES],
+    /// The target's up prior (unit), and the smallest angle (degrees) a result turned it
+    /// from the template's anterior axis.
+    prior: Option<Vec3>,
+    closest_deg: f32,
 }
 
 impl CoarsePose {
@@ -135,14 +145,24 @@ impl CoarsePose {
     pub const ALL_STARTS: u8 = 9;
 
     /// Before the first of `starts` (at most [`CoarsePose::ALL_STARTS`]); `fs`, `fd` as
-    /// for [`coarse_pose`].
-    pub fn new(fs: &Frame, fd: &Frame, starts: u8) -> Self {
+    /// for [`coarse_pose`]; `up`, the target's up prior (see [`PRIOR_CONE_DEG`]; a zero or
+    /// non-finite vector is no prior).
+    pub fn new(fs: &Frame, fd: &Frame, starts: u8, up: Option<Vec3>) -> Self {
         CoarsePose {
             start: 0,
             starts: starts.clamp(1, Self::ALL_STARTS),
             icp: Icp::new(Self::initial(0, fs, fd)),
             ranked: [None; CANDIDATES],
+            prior: up.and_then(|u| u.try_normalize(1e-6)),
+            closest_deg: f32::INFINITY,
         }
+    }
+
+    /// With a prior, the smallest angle (degrees) between it, turned by a start's result,
+    /// and the template's anterior axis (infinite before the first result or without a
+    /// prior).
+    pub fn closest_to_prior_deg(&self) -> f32 {
+        self.closest_deg
     }
 
     /// The initial pose of a start: centroid alignment, then the identity (start 0) or
@@ -201,6 +221,13 @@ impl CoarsePose {
     /// distinct from if its RMS is lower (else it is dropped), then takes its place by RMS
     /// (the worst falls off). A NaN RMS ranks last.
     fn rank(&mut self, pose: Rigid, rms: f32) {
+        if let Some(up) = self.prior {
+            let cos = (pose.rotation * up).z.clamp(-1.0, 1.0);
+            self.closest_deg = self.closest_deg.min(libm::acosf(cos).to_degrees());
+            if cos < libm::cosf(PRIOR_CONE_DEG.to_radians()) {
+                return;
+            }
+        }
         let rms = if rms.is_nan() { f32::INFINITY } else { rms };
         let ranked = &mut self.ranked;
         if let Some(i) = ranked
@@ -473,7 +500,7 @@ mod tests {
     /// falls off, and NaN ranks last.
     #[test]
     fn ranking_keeps_the_best_distinct_poses() {
-        let mut c = CoarsePose::new(&Frame::identity(), &Frame::identity(), 1);
+        let mut c = CoarsePose::new(&Frame::identity(), &Frame::identity(), 1, None);
         let entered = [
             (0.0, 5.0),
             (10.0, 4.0),  // same as 0° (10° apart), better: replaces it

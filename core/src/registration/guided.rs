@@ -39,7 +39,9 @@ use crate::math::fit::{equal_steps, PolyFit};
 use crate::math::geom::{Frame, Rigid};
 use crate::math::kabsch;
 use crate::math::kdtree::KdTree;
-use crate::registration::endpoints::{distinct, CoarsePose, Icp, IcpTree, CANDIDATES};
+use crate::registration::endpoints::{
+    distinct, CoarsePose, Icp, IcpTree, CANDIDATES, PRIOR_CONE_DEG,
+};
 use crate::registration::local_rigid::{LocalRigid, Lookup, TransformCache};
 use crate::registration::skeleton::SkeletonGraph;
 use crate::Vec3;
@@ -461,7 +463,7 @@ impl TargetSkeleton {
             template_tree: IcpTree::new(),
             target_tree: NodeTree::new(),
             carried_tree: NodeTree::new(),
-            coarse: CoarsePose::new(&Frame::identity(), &Frame::identity(), 1),
+            coarse: CoarsePose::new(&Frame::identity(), &Frame::identity(), 1, None),
             icp: Icp::new(Rigid::identity()),
             hypothesis: 0,
             refined: [None; CANDIDATES],
@@ -485,6 +487,7 @@ impl TargetSkeleton {
         target: &SkeletonGraph,
         template: &SkeletonGraph,
         template_labels: &[u8],
+        target_up: Option<Vec3>,
     ) -> Result<()> {
         if template_labels.len() != template.som1.len() {
             return Err(Error::Config(
@@ -494,7 +497,12 @@ impl TargetSkeleton {
         self.template_tree.start(template.som1.len())?;
         self.target_tree.start(target.som1.len())?;
         self.carried_tree.start(0)?;
-        self.coarse = CoarsePose::new(&target.frame, &template.frame, CoarsePose::ALL_STARTS);
+        self.coarse = CoarsePose::new(
+            &target.frame,
+            &template.frame,
+            CoarsePose::ALL_STARTS,
+            target_up,
+        );
         self.icp = Icp::new(Rigid::identity());
         self.hypothesis = 0;
         self.refined = [None; CANDIDATES];
@@ -563,7 +571,18 @@ impl TargetSkeleton {
                     &template.frame,
                     queries as u32,
                 )? {
-                    let (coarse, _) = self.coarse.result().ok_or(Error::RigidFit)?;
+                    let Some((coarse, _)) = self.coarse.result() else {
+                        // Every start ended against the prior (or none converged).
+                        let off = self.coarse.closest_to_prior_deg();
+                        return Err(if off.is_finite() {
+                            Error::AgainstPrior {
+                                closest_deg: off as u8,
+                                cone_deg: PRIOR_CONE_DEG as u8,
+                            }
+                        } else {
+                            Error::RigidFit
+                        });
+                    };
                     self.icp = Icp::new(coarse);
                     self.hypothesis = 0;
                     self.refined = [None; CANDIDATES];

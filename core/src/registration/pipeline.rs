@@ -320,7 +320,7 @@ impl Registering {
             // The run (~13 KiB) is started in place, not built on the stack and moved.
             self.stage = Stage::Guided(graph, TargetSkeleton::new());
             if let Stage::Guided(graph, run) = &mut self.stage {
-                run.start(graph, &template.graph, &template.node_labels)?;
+                run.start(graph, &template.graph, &template.node_labels, cfg.target_up)?;
             }
             return Ok(false);
         }

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 /// Protocol magic, ASCII "RBRG" read as a little-endian `u32`.
 pub const MAGIC: u32 = u32::from_le_bytes(*b"RBRG");
 /// Protocol version; bumped on any change of a message's encoding.
-pub const VERSION: u16 = 1;
+pub const VERSION: u16 = 2;
 
 /// Pixels travel as `u16` in 1/16 pixel: up to 4095.94 px at 0.0625 px resolution.
 pub const PIXEL_SUBDIVISIONS: f32 = 16.0;
@@ -59,8 +59,13 @@ pub struct Configure {
     pub max_accel_mm_s2: f32,
     /// Distance of the probe face from the bone surface at a waypoint, mm.
     pub standoff_mm: f32,
+    /// The patient's anterior (the chest's front) as a direction in the robot base
+    /// frame, roughly: the registration's orientation prior
+    /// ([`crate::config::Config::target_up`]). All zeros: none, any pose. (Added in
+    /// version 2.)
+    pub target_up: P3,
 }
-const CONFIGURE: usize = PROBE_W + 24 * F32 + I32 + 4 * F32;
+const CONFIGURE: usize = PROBE_W + 24 * F32 + I32 + 4 * F32 + 3 * F32;
 
 /// One template SOM-1 node and its rib label (0 none, 1 sternum, 2..=5 rib).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -388,6 +393,7 @@ pub fn error_summary(code: u8) -> &'static str {
         19 => "a pixel outside the image",
         20 => "a rib side was not seen in the sweep (scan it and register again)",
         21 => "the target's pose is ambiguous (scan more of both sides and register again)",
+        22 => "no pose agrees with the configured patient orientation",
         _ => "unknown error",
     }
 }
@@ -430,5 +436,6 @@ pub fn error_code(e: &crate::error::Error) -> u8 {
         E::Pixel { .. } => 19,
         E::NotSeen { .. } => 20,
         E::Ambiguous { .. } => 21,
+        E::AgainstPrior { .. } => 22,
     }
 }

@@ -57,6 +57,7 @@ pub fn add(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("RESEND_AFTER_S", hil::session::RESEND_AFTER.as_secs_f64())?;
     m.add_function(wrap_pyfunction!(encode_frame, m)?)?;
     m.add_function(wrap_pyfunction!(decode_frame, m)?)?;
+    m.add_function(wrap_pyfunction!(error_summary, m)?)?;
     m.add_class::<FrameReceiver>()?;
     m.add_class::<LinkSession>()?;
     sim::add(m)
@@ -69,6 +70,13 @@ fn link_error(e: CliError) -> PyErr {
 
 fn frame_error(e: wire::FrameError) -> PyErr {
     FrameError::new_err(e.to_string())
+}
+
+/// What a core error code (a NACK's `Invalid` or a registration fault's detail) stands
+/// for, in a few words.
+#[pyfunction]
+fn error_summary(code: u8) -> &'static str {
+    wire::error_summary(code)
 }
 
 /// Encodes a message (its serde form; `to_controller` says which direction's type it

@@ -28,6 +28,7 @@ from ribreg.link import (
     HelloAck,
     LinkError,
     MAX_FRAME,
+    VERSION,
     Nack,
     NackCode,
     Node,
@@ -115,7 +116,7 @@ def test_messages_the_protocol_cannot_carry_are_value_errors():
 def test_the_in_process_session_handshakes_and_records_refusals():
     s = Session.in_process()
     ack = s.handshake()
-    assert ack == HelloAck(0x47524252, 1, MAX_FRAME)
+    assert ack == HelloAck(0x47524252, VERSION, MAX_FRAME)
     assert s.simulated_clock
     # Registering without a template is refused by the application, not re-sent.
     seq = s.send(Command(CommandKind.REGISTER))
@@ -234,3 +235,22 @@ def test_a_session_shared_by_threads_does_not_deadlock():
     t.join(10.0)
     assert not t.is_alive()
     assert got and got[0] is not None and got[0].expected_seq == 2
+
+
+def test_fault_text_and_configure_prior_default() -> None:
+    """A registration fault reads as text, as ``ribreg hil`` prints it; Configure's
+    orientation prior defaults to none (all zeros) and survives a frame round trip."""
+    from ribreg.link import Configure, Fault, FaultKind, Probe
+
+    f = Fault(FaultKind.REGISTRATION, 20)
+    assert str(f) == ("registration refused: a rib side was not seen in the sweep "
+                      "(scan it and register again) (error code 20)")
+    assert "ambiguous" in str(Fault(FaultKind.REGISTRATION, 21))
+    assert "unknown error" in str(Fault(FaultKind.REGISTRATION, 99))
+    assert str(Fault(FaultKind.POSE_TIMEOUT)) == "robot poses stopped while executing"
+
+    eye = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]
+    c = Configure(Probe(384, 480, 38.0, 60.0), eye, eye, 0, 2.0, 20.0, 100.0, 5.0)
+    assert c.target_up == [0.0, 0.0, 0.0]
+    c.target_up = [0.0, 0.0, 1.0]
+    assert decode_frame(encode_frame(1, c), to_controller=True) == (1, c)

@@ -101,9 +101,13 @@ fn rigid12(r: &Rigid) -> [f32; 12] {
     ]
 }
 
-/// Extra robot behaviour for tests of the controller's watchdog.
+/// Extra robot behaviour for tests of the controller's watchdog, the sweep, and what
+/// the robot PC configures.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct RunOptions {
+    /// The orientation prior the robot PC configures (`Configure::target_up`: the
+    /// patient's anterior in the robot base frame); none unless set.
+    pub target_up: Option<[f32; 3]>,
     /// While executing, the robot stops reporting poses from this many ms after Execute
     /// for the second number of ms.
     pub pose_gap_ms: Option<(u64, u64)>,
@@ -166,6 +170,8 @@ pub fn prepare(phantom: &PhantomConfig, sweep_cfg: &SweepConfig) -> Result<Prepa
         max_speed_mm_s: MAX_SPEED_MM_S,
         max_accel_mm_s2: MAX_ACCEL_MM_S2,
         standoff_mm: STANDOFF_MM,
+        // No orientation prior: the controller finds the pose from any robot set-up.
+        target_up: [0.0; 3],
     })];
     let nodes: Vec<Node> = tpl
         .graph
@@ -242,10 +248,13 @@ pub fn run_with<P: Port>(
     let Prepared {
         logs,
         lag_s,
-        upload,
+        mut upload,
         nodes,
         waypoints: n_waypoints,
     } = prepared;
+    if let (Some(up), Some(ToController::Configure(c))) = (options.target_up, upload.first_mut()) {
+        c.target_up = up;
+    }
     let pair = &logs.pair;
     let cal = logs.calibration;
 

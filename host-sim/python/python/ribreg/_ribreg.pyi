@@ -26,6 +26,7 @@ __all__ = [
     "RESEND_AFTER_S",
     "encode_frame",
     "decode_frame",
+    "error_summary",
     "FrameReceiver",
     "LinkSession",
     "STANDOFF_MM",
@@ -121,6 +122,9 @@ TOLERANCE_MM: float
 
 def encode_frame(seq: int, message: _Wire, to_controller: bool = True) -> bytes:
     """Encodes a message (serde form) with sequence `seq` as one frame, delimiter included."""
+
+def error_summary(code: int) -> str:
+    """What a core error code (a NACK's or a registration fault's) stands for, in a few words."""
 
 def decode_frame(data: bytes, to_controller: bool = False) -> Tuple[int, _Wire]:
     """Decodes one frame (delimiter optional) into `(seq, message)`."""

@@ -31,7 +31,7 @@ same bytes). Errors:
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass, fields, is_dataclass
+from dataclasses import dataclass, field, fields, is_dataclass
 from typing import Any, Dict, List, Optional, Tuple, Type, Union
 
 from . import _ribreg as _rs
@@ -172,6 +172,9 @@ class Configure(Message):
     max_speed_mm_s: float  #: Setpoint speed limit, mm/s.
     max_accel_mm_s2: float  #: Setpoint acceleration limit, mm/s².
     standoff_mm: float  #: Probe face to bone surface at a waypoint, mm.
+    #: The patient's anterior as a direction in the robot base frame, roughly: the
+    #: registration's orientation prior (3 numbers; all zeros: none, any pose).
+    target_up: List[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
 
     @classmethod
     def _from_body(cls, body: Any) -> "Configure":
@@ -347,6 +350,13 @@ class Fault(Message):
     def _from_body(cls, body: Any) -> "Fault":
         kind, detail = _unit_or_newtype(body)
         return cls(FaultKind(kind), detail)
+
+    def __str__(self) -> str:
+        """What happened, in words: ``registration refused: a rib side was not seen ...``."""
+        if FaultKind(self.kind) is FaultKind.REGISTRATION:
+            code = self.detail if self.detail is not None else 0
+            return f"registration refused: {_rs.error_summary(code)} (error code {code})"
+        return "robot poses stopped while executing"
 
 
 @dataclass
