@@ -182,6 +182,8 @@ SETPOINT_W = Struct(("t_us", U64), ("position", P3), ("quat", Array(F32, 4)), ("
 COST_W = Struct(("registration_instructions", U64), ("registration_calls", U32),
                 ("worst_call_instructions", U32), ("worst_step_instructions", U32),
                 ("worst_receive_instructions", U32), ("peak_stack_bytes", U32))
+REGISTRATION_W = Struct(("hypotheses", U8), ("residual_mm", F32), ("runner_up_mm", F32),
+                        ("min_side_span_percent", U8), ("waypoints", U8))
 FROM_CONTROLLER = Enum(
     "FromController",
     ("HelloAck", Struct(("magic", U32), ("version", U16), ("max_frame", U16))),
@@ -192,6 +194,7 @@ FROM_CONTROLLER = Enum(
     ("Setpoint", SETPOINT_W),
     ("Fault", FAULT),
     ("Cost", COST_W),
+    ("Registration", REGISTRATION_W),
 )
 DIRECTIONS = {"to_controller": TO_CONTROLLER, "from_controller": FROM_CONTROLLER}
 
@@ -501,6 +504,9 @@ def cases():
         {"Cost": {"registration_instructions": 123_456_789_012, "registration_calls": 1093,
                   "worst_call_instructions": 141_233, "worst_step_instructions": 0,
                   "worst_receive_instructions": 0xFFFF_FFFF, "peak_stack_bytes": 127}})
+    add("registration", "the registration's confidence before its waypoints (version 2)", fr, 0x4001,
+        {"Registration": {"hypotheses": 2, "residual_mm": f32(3.575), "runner_up_mm": f32(5.8),
+                          "min_side_span_percent": 255, "waypoints": 10}})
 
     # COBS edges (found by search; the script asserts the property each is made for).
     add("cobs_tail_254", "payload ends in a run of exactly 254 non-zero bytes: a final 0xFF "

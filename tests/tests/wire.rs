@@ -52,8 +52,9 @@ use proptest::test_runner::{FileFailurePersistence, TestRunner};
 use ribreg_core::limits::MAX_FRAME_PIXELS;
 use ribreg_core::wire::{
     self, Command, Configure, CostW, Fault, FrameError, FrameW, FromController, NackCode, Node,
-    PoseW, ProbeW, Receiver, SetpointW, State, StatusW, TemplateShape, ToController, WaypointW,
-    MAX_FRAME, MAX_FROM_CONTROLLER, MAX_TO_CONTROLLER, NODES_PER_CHUNK, WAYPOINTS_PER_CHUNK,
+    PoseW, ProbeW, Receiver, RegistrationW, SetpointW, State, StatusW, TemplateShape, ToController,
+    WaypointW, MAX_FRAME, MAX_FROM_CONTROLLER, MAX_TO_CONTROLLER, NODES_PER_CHUNK,
+    WAYPOINTS_PER_CHUNK,
 };
 use serde::de::DeserializeOwned;
 use serde::Serialize;
@@ -179,6 +180,7 @@ fn from_variants(m: &FromController, seen: &mut BTreeSet<String>) {
         FromController::Waypoint(_) => "Waypoint",
         FromController::Setpoint(_) => "Setpoint",
         FromController::Cost(_) => "Cost",
+        FromController::Registration(_) => "Registration",
         FromController::Fault(f) => {
             seen.insert(format!(
                 "Fault::{}",
@@ -639,6 +641,15 @@ fn from_controller() -> BoxedStrategy<FromController> {
                 worst_step_instructions: d,
                 worst_receive_instructions: e,
                 peak_stack_bytes: f,
+            })
+        }),
+        (any::<u8>(), f32s(), f32s(), any::<u8>(), any::<u8>()).prop_map(|(h, r, u, c, w)| {
+            FromController::Registration(RegistrationW {
+                hypotheses: h,
+                residual_mm: r,
+                runner_up_mm: u,
+                min_side_span_percent: c,
+                waypoints: w,
             })
         }),
     ]

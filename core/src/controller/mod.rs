@@ -65,12 +65,13 @@ use crate::error::{Error, Result};
 use crate::limits::{MIN_CLOUD_POINTS, OUTBOX, SKELETON_POINTS, SOM1_CAPACITY, TRACK_CAPACITY};
 use crate::math::geom::Rigid;
 use crate::registration::local_rigid::{Lookup, TransformCache};
-use crate::registration::pipeline::{Registering, Template};
+use crate::registration::pipeline::{Registering, Registration, Template};
 
 use crate::acquisition::track::TrackedPose;
 use crate::wire::{
-    error_code, Command, Configure, CostW, FrameError, FromController, NackCode, PoseW, State,
-    StatusW, TemplateShape, ToController, WaypointW, MAX_WAYPOINTS, PIXEL_SUBDIVISIONS,
+    error_code, Command, Configure, CostW, FrameError, FromController, NackCode, PoseW,
+    RegistrationW, State, StatusW, TemplateShape, ToController, WaypointW, MAX_WAYPOINTS,
+    PIXEL_SUBDIVISIONS,
 };
 use crate::Vec3;
 use nalgebra::Matrix3;
@@ -136,6 +137,8 @@ pub struct Controller<const VOXELS: usize> {
     probe_count: u32,
     registering: Option<Registering>,
     targets: heapless::Vec<ProbeTarget, MAX_WAYPOINTS>,
+    /// The last registration's confidence, sent with its result.
+    confidence: Option<RegistrationW>,
     /// The next waypoint's transform being found (bounded steps), then found.
     lookup: Option<Lookup>,
     mapped: Option<(Rigid, u32)>,
@@ -180,6 +183,7 @@ impl<const VOXELS: usize> Controller<VOXELS> {
             probe_count: 0,
             registering: None,
             targets: heapless::Vec::new(),
+            confidence: None,
             lookup: None,
             mapped: None,
             waypoint_cache: TransformCache::new(),
@@ -397,6 +401,7 @@ impl<const VOXELS: usize> Controller<VOXELS> {
                 self.probe_sum = Vec3::zeros();
                 self.probe_count = 0;
                 self.targets.clear();
+                self.confidence = None;
                 self.state = Sweeping;
                 Ok(())
             }
@@ -465,6 +470,9 @@ impl<const VOXELS: usize> Controller<VOXELS> {
             }
             Command::Result => {
                 self.require(&[Ready, Executing, Done])?;
+                if let Some(c) = self.confidence {
+                    self.send(FromController::Registration(c));
+                }
                 for i in 0..self.targets.len() {
                     let t = self.targets[i];
                     self.send(FromController::Waypoint(WaypointW {
@@ -543,6 +551,7 @@ impl<const VOXELS: usize> Controller<VOXELS> {
                 self.sweep.insert_queued(SWEEP_WORK_PER_POLL);
             } else if self.sweep.cloud.finish_some(0) {
                 self.targets.clear();
+                self.confidence = None;
                 self.start_registration(&cfg);
             } else {
                 self.sweep.cloud.finish_some(VOXELS_FINISHED_PER_POLL);
@@ -591,6 +600,11 @@ impl<const VOXELS: usize> Controller<VOXELS> {
             },
             Err(e) => Err(e),
         };
+        if outcome.is_ok() {
+            if let Some(reg) = r.registration() {
+                self.confidence = Some(confidence(reg, template, self.targets.len()));
+            }
+        }
         self.registering = None;
         match outcome {
             Ok(()) => {
@@ -627,6 +641,30 @@ impl<const VOXELS: usize> Controller<VOXELS> {
         self.send(FromController::Fault(crate::wire::Fault::Registration(
             error_code(&e),
         )));
+    }
+}
+
+/// The wire summary of how clearly `reg` (of `template`) found the patient.
+fn confidence(reg: &Registration, template: &Template, waypoints: usize) -> RegistrationW {
+    let spans = crate::registration::guided::side_spans(
+        &template.skeleton.points,
+        &template.midline_fraction,
+        &reg.skeleton.points,
+        &reg.pose,
+    );
+    // NaN (no evidence) counts as 0 %.
+    let least = spans.iter().flatten().fold(
+        f32::INFINITY,
+        |a, &b| if b.is_nan() { 0.0 } else { a.min(b) },
+    );
+    let c = reg.confidence;
+    RegistrationW {
+        hypotheses: c.map_or(0, |c| c.hypotheses),
+        residual_mm: c.map_or(f32::NAN, |c| c.residual_mm),
+        runner_up_mm: c.map_or(f32::NAN, |c| c.runner_up_mm),
+        // `as` saturates: 0..=255 %.
+        min_side_span_percent: (least * 100.0 + 0.5) as u8,
+        waypoints: waypoints as u8,
     }
 }
 

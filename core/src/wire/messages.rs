@@ -133,7 +133,8 @@ pub enum Command {
     Abort,
     /// Send a status.
     Status,
-    /// Send the registration result (one message per waypoint).
+    /// Send the registration result: its confidence ([`FromController::Registration`]),
+    /// then one message per waypoint.
     Result,
     /// Send the controller's measured costs ([`FromController::Cost`]).
     Cost,
@@ -276,6 +277,24 @@ pub struct WaypointW {
 }
 const WAYPOINT_W: usize = 2 * U8 + 4 * F32;
 
+/// How clearly the registration found the patient, sent before its waypoints: the pose
+/// hypotheses' residuals ([`crate::registration::guided::PoseConfidence`]) and the
+/// target's coverage ([`crate::registration::guided::side_spans`]). (Added in version 2.)
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RegistrationW {
+    /// Pose hypotheses refined.
+    pub hypotheses: u8,
+    /// Residual of the pose taken, mm.
+    pub residual_mm: f32,
+    /// Residual of the best hypothesis distinct from it, mm (infinite when none).
+    pub runner_up_mm: f32,
+    /// The target's smallest rib-side span, percent of the template's (saturating).
+    pub min_side_span_percent: u8,
+    /// Waypoints mapped (the [`FromController::Waypoint`] messages that follow).
+    pub waypoints: u8,
+}
+const REGISTRATION_W: usize = 3 * U8 + 2 * F32;
+
 /// A probe setpoint: TCP pose in the robot base frame.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SetpointW {
@@ -343,6 +362,8 @@ pub enum FromController {
     Fault(Fault),
     /// Measured costs (zero where the platform does not measure them).
     Cost(CostW),
+    /// The registration's confidence, before its waypoints (on [`Command::Result`]).
+    Registration(RegistrationW),
 }
 
 /// Largest encoded [`FromController`].
@@ -353,7 +374,10 @@ pub const MAX_FROM_CONTROLLER: usize = TAG
             U16 + 2 * TAG,
             max(
                 STATUS_W,
-                max(WAYPOINT_W, max(SETPOINT_W, max(2 * TAG, COST_W))),
+                max(
+                    WAYPOINT_W,
+                    max(SETPOINT_W, max(2 * TAG, max(COST_W, REGISTRATION_W))),
+                ),
             ),
         ),
     );

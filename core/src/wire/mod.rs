@@ -53,7 +53,7 @@ mod messages;
 pub use self::framing::{crc32, decode, encode, FrameError, Receiver, MAX_FRAME};
 pub use self::messages::{
     error_code, error_summary, Command, Configure, CostW, Fault, FrameW, FromController, NackCode,
-    Node, PoseW, ProbeW, RigidW, SetpointW, State, StatusW, TemplateShape, ToController, WaypointW,
-    MAGIC, MAX_FROM_CONTROLLER, MAX_TO_CONTROLLER, MAX_WAYPOINTS, NODES_PER_CHUNK, P3,
-    PIXEL_SUBDIVISIONS, VERSION, WAYPOINTS_PER_CHUNK,
+    Node, PoseW, ProbeW, RegistrationW, RigidW, SetpointW, State, StatusW, TemplateShape,
+    ToController, WaypointW, MAGIC, MAX_FROM_CONTROLLER, MAX_TO_CONTROLLER, MAX_WAYPOINTS,
+    NODES_PER_CHUNK, P3, PIXEL_SUBDIVISIONS, VERSION, WAYPOINTS_PER_CHUNK,
 };

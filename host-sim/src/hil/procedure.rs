@@ -6,8 +6,8 @@
 use ribreg_core::controller::CONTROLLER_VOXEL_MM;
 use ribreg_core::math::geom::Rigid;
 use ribreg_core::wire::{
-    self, Command, Configure, CostW, FromController, Node, State, TemplateShape, ToController,
-    WaypointW, MAGIC, NODES_PER_CHUNK, VERSION, WAYPOINTS_PER_CHUNK,
+    self, Command, Configure, CostW, FromController, Node, RegistrationW, State, TemplateShape,
+    ToController, WaypointW, MAGIC, NODES_PER_CHUNK, VERSION, WAYPOINTS_PER_CHUNK,
 };
 use serde::Serialize;
 use std::io::Write;
@@ -67,6 +67,9 @@ pub struct HilReport {
     pub wall_s: f64,
     /// The controller's measured costs (zeros in-process).
     pub cost: CostW,
+    /// How clearly the controller's registration found the patient (pose hypotheses'
+    /// residuals, least rib-side coverage), as it reported before the waypoints.
+    pub confidence: Option<RegistrationW>,
     /// Pose-timeout faults the controller reported.
     pub pose_timeouts: u32,
     /// Setpoints received more than 70 ms into a pose gap (must be 0).
@@ -312,6 +315,7 @@ pub fn run_with<P: Port>(
         };
     session.send(&ToController::Command(Command::Register))?;
     let mut mapped: Vec<WaypointW> = Vec::new();
+    let mut confidence = None;
     let reg_start = Instant::now();
     while mapped.len() < n_waypoints {
         if reg_start.elapsed() > timeout {
@@ -324,6 +328,7 @@ pub fn run_with<P: Port>(
         while let Some(m) = session.next_message() {
             match m {
                 FromController::Waypoint(w) => mapped.push(w),
+                FromController::Registration(c) => confidence = Some(c),
                 FromController::Fault(f) => {
                     return Err(CliError::Link(format!("controller fault: {f}")))
                 }
@@ -332,7 +337,18 @@ pub fn run_with<P: Port>(
         }
     }
     mapped.sort_by_key(|w| w.index);
-    progress(&format!("registered: {} waypoints mapped", mapped.len()));
+    match confidence {
+        Some(c) => progress(&format!(
+            "registered: {} waypoints mapped; pose residual {:.2} mm (runner-up {:.2} mm, {} \
+             hypotheses), least rib-side coverage {} %",
+            mapped.len(),
+            c.residual_mm,
+            c.runner_up_mm,
+            c.hypotheses,
+            c.min_side_span_percent
+        )),
+        None => progress(&format!("registered: {} waypoints mapped", mapped.len())),
+    }
 
     // Execute.
     session.send(&ToController::Command(Command::Execute))?;
@@ -481,6 +497,7 @@ pub fn run_with<P: Port>(
         pose_timeouts,
         setpoints_in_gap,
         cost: cost.unwrap_or_default(),
+        confidence,
     })
 }
 

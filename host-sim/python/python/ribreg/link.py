@@ -16,7 +16,7 @@ This module gives the messages as typed classes:
   :class:`Command`;
 * controller → robot PC: :class:`HelloAck`, :class:`Ack`, :class:`Nack`,
   :class:`Status`, :class:`Waypoint`, :class:`Setpoint`, :class:`Fault`,
-  :class:`Cost`.
+  :class:`Cost`, :class:`Registration`.
 
 Floats hold the wire's ``f32`` values exactly (a decoded message re-encodes to the
 same bytes). Errors:
@@ -42,7 +42,7 @@ __all__ = [
     "CommandKind", "State", "NackCode", "FaultKind", "Probe", "Node",
     "Hello", "Configure", "TemplateNodes", "TemplateShape", "Waypoints", "Pose", "Frame",
     "Command", "HelloAck", "Ack", "Nack", "Status", "Waypoint", "Setpoint", "Fault",
-    "Cost", "ToController", "FromController", "Message", "LinkStats",
+    "Cost", "Registration", "ToController", "FromController", "Message", "LinkStats",
     "encode_frame", "decode_frame", "Receiver", "Session",
 ]
 
@@ -372,16 +372,29 @@ class Cost(Message):
     peak_stack_bytes: int  #: Peak stack use, bytes.
 
 
+@dataclass
+class Registration(Message):
+    """How clearly the registration found the patient, sent before its waypoints."""
+
+    _to_controller = False
+    hypotheses: int  #: Pose hypotheses refined.
+    residual_mm: float  #: Residual of the pose taken, mm.
+    runner_up_mm: float  #: Residual of the best distinct hypothesis, mm (inf if none).
+    min_side_span_percent: int  #: Least rib-side span, percent of the template's.
+    waypoints: int  #: Waypoints mapped (the :class:`Waypoint` messages that follow).
+
+
 #: A robot PC → controller message.
 ToController = Union[Hello, Configure, TemplateNodes, TemplateShape, Waypoints, Pose, Frame,
                      Command]
 #: A controller → robot PC message.
-FromController = Union[HelloAck, Ack, Nack, Status, Waypoint, Setpoint, Fault, Cost]
+FromController = Union[HelloAck, Ack, Nack, Status, Waypoint, Setpoint, Fault, Cost,
+                       Registration]
 
 _TO: Dict[str, Type[Message]] = {c.__name__: c for c in (
     Hello, Configure, TemplateNodes, TemplateShape, Waypoints, Pose, Frame, Command)}
 _FROM: Dict[str, Type[Message]] = {c.__name__: c for c in (
-    HelloAck, Ack, Nack, Status, Waypoint, Setpoint, Fault, Cost)}
+    HelloAck, Ack, Nack, Status, Waypoint, Setpoint, Fault, Cost, Registration)}
 
 
 def _plain(x: Any) -> Any:
