@@ -12,7 +12,8 @@
 /// logged.
 pub const LONG_CALL: u64 = 168_000;
 
-/// Iterations of `cost::spin` timed at boot (2 instructions each).
+/// Iterations of `cost::spin` timed at boot (2 instructions each), once and twice over:
+/// the difference, 20,000 instructions, is 500 ticks on MPS2 and about 3,360 on the F405.
 pub const CALIBRATION_ITERATIONS: u32 = 10_000;
 
 /// An instruction count as reported on the wire (`u32`, saturating).
@@ -93,20 +94,23 @@ mod target {
         overhead_ticks: u64,
         /// Ticks around `spin(CALIBRATION_ITERATIONS)`.
         spin_ticks: u64,
-        /// The same in instructions, assuming `-icount shift=0`.
-        spin_instructions: u64,
+        /// Ticks of `2 * CALIBRATION_ITERATIONS` instructions: `spin` of twice the
+        /// iterations minus `spin` of once, so the call and stamps cancel out.
+        net_ticks: u64,
     }
 
+    /// Times `spin` and sets the counter's instructions per tick from it
+    /// ([`Cost::calibrate`]).
     fn calibrate() -> Calibration {
         let ((), overhead_ticks) = Cost::measure(|| ());
-        let stamp = Cost::start();
-        cost::spin(core::hint::black_box(CALIBRATION_ITERATIONS));
-        let spin_instructions = stamp.elapsed_instructions();
-        let spin_ticks = spin_instructions / cost::INSTRUCTIONS_PER_TICK;
+        let spin = |n: u32| Cost::measure(|| cost::spin(core::hint::black_box(n))).1;
+        let spin_ticks = spin(CALIBRATION_ITERATIONS);
+        let net_ticks = spin(2 * CALIBRATION_ITERATIONS).saturating_sub(spin_ticks);
+        Cost::calibrate(2 * CALIBRATION_ITERATIONS, clamp(net_ticks.max(1)));
         Calibration {
             overhead_ticks,
             spin_ticks,
-            spin_instructions,
+            net_ticks,
         }
     }
 
@@ -134,17 +138,20 @@ mod target {
             let cal = calibrate();
             let (stack_lo, stack_hi) = cost::stack_bounds();
             defmt::info!(
-                "ribreg-firmware up at tick {=u64}; stack {=usize:#x}..{=usize:#x} ({=usize} B)",
+                "ribreg-firmware on {=str} up at tick {=u64}; stack {=usize:#x}..{=usize:#x} ({=usize} B)",
+                crate::board::NAME,
                 boot.ticks(),
                 stack_lo,
                 stack_hi,
                 stack_hi - stack_lo
             );
             defmt::info!(
-                "spin of {=u32} instructions = {=u64} ticks (= {=u64} instructions if run with -icount shift=0); empty region = {=u64} ticks",
+                "spin of {=u32} instructions = {=u64} ticks, {=u32} more = {=u64} ticks more: {=u64} instructions per 1000 ticks under -icount shift=0; empty region = {=u64} ticks",
                 2 * CALIBRATION_ITERATIONS,
                 cal.spin_ticks,
-                cal.spin_instructions,
+                2 * CALIBRATION_ITERATIONS,
+                cal.net_ticks,
+                Cost::instructions(1_000),
                 cal.overhead_ticks
             );
             Meter {

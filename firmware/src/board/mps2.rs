@@ -1,4 +1,5 @@
-//! Driver for the ARM CMSDK APB UART (UART0 at 0x4000_4000 on QEMU's mps2-an386).
+//! The MPS2-AN386 board: a driver for the ARM CMSDK APB UART (UART0 at 0x4000_4000 on
+//! QEMU's mps2-an386), the board's serial port.
 //!
 //! One byte each way, no FIFO. Registers: DATA 0x00, STATE 0x04 (bit 0 TX full, bit 1
 //! RX full, bits 2/3 TX/RX overrun, write 1 to clear), CTRL 0x08 (bit 0 TX enable, bit 1
@@ -20,6 +21,8 @@ use core::ptr::{read_volatile, write_volatile};
 use core::sync::atomic::{AtomicBool, Ordering};
 use cortex_m::interrupt::InterruptNumber;
 use cortex_m::peripheral::NVIC;
+// `Read` waits through the board trait's `wait_readable`.
+use crate::board::Serial as _;
 
 const DATA: usize = 0x00;
 const STATE: usize = 0x04;
@@ -89,6 +92,17 @@ pub struct Uart<const BASE: usize, const RX_IRQ: u16> {
 
 /// UART0 of the MPS2 boards.
 pub type Uart0 = Uart<UART0_BASE, UART0_RX_IRQ>;
+
+/// The board's serial port: UART0.
+pub type Port = Uart0;
+
+/// UART0 at 115200 baud: the board's set-up (the MPS2 needs no clock or pin set-up).
+pub fn take_serial() -> Port {
+    let Some(uart) = Uart0::take(BAUDDIV_115200) else {
+        panic!("UART0 taken twice");
+    };
+    uart
+}
 
 static UART0_TAKEN: AtomicBool = AtomicBool::new(false);
 
@@ -170,35 +184,6 @@ impl<const BASE: usize, const RX_IRQ: u16> Uart<BASE, RX_IRQ> {
         }
         self.write_reg(DATA, u32::from(byte));
         true
-    }
-
-    /// Sleeps until a byte has arrived (without taking it). Called with interrupts masked
-    /// it still returns, but other pending interrupts then turn the sleep into polling.
-    pub fn wait_readable(&mut self) {
-        while !self.rx_full() {
-            self.sleep_until_rx_or_interrupt();
-        }
-    }
-
-    /// Sleeps until a byte arrives or any other interrupt (the 1 ms SysTick) wakes the
-    /// core; returns at once if a byte is already waiting.
-    pub fn sleep_until_rx_or_interrupt(&mut self) {
-        let unmasked = cortex_m::register::primask::read().is_active();
-        cortex_m::interrupt::disable();
-        self.write_reg(CTRL, CTRL_TX_EN | CTRL_RX_EN | CTRL_RX_IRQ_EN);
-        // A byte that arrives after this check pends the interrupt, and WFI returns
-        // at once on a pending interrupt even with PRIMASK set.
-        if !self.rx_full() {
-            cortex_m::asm::wfi();
-        }
-        self.write_reg(CTRL, CTRL_TX_EN | CTRL_RX_EN);
-        self.write_reg(INTCLEAR, INT_RX);
-        NVIC::unpend(Irq(RX_IRQ));
-        if unmasked {
-            // SAFETY: interrupts were enabled on entry and masked only here, so no
-            // critical section is broken; pending handlers (SysTick) run now.
-            unsafe { cortex_m::interrupt::enable() };
-        }
     }
 }
 
@@ -287,6 +272,35 @@ impl<const BASE: usize, const RX_IRQ: u16> embedded_hal_nb::serial::Write<u8>
             Err(embedded_hal_nb::nb::Error::WouldBlock)
         } else {
             Ok(())
+        }
+    }
+}
+
+impl<const BASE: usize, const RX_IRQ: u16> crate::board::Serial for Uart<BASE, RX_IRQ> {
+    /// Called with interrupts masked it still returns, but other pending interrupts then
+    /// turn the sleep into polling.
+    fn wait_readable(&mut self) {
+        while !self.rx_full() {
+            self.sleep_until_rx_or_interrupt();
+        }
+    }
+
+    fn sleep_until_rx_or_interrupt(&mut self) {
+        let unmasked = cortex_m::register::primask::read().is_active();
+        cortex_m::interrupt::disable();
+        self.write_reg(CTRL, CTRL_TX_EN | CTRL_RX_EN | CTRL_RX_IRQ_EN);
+        // A byte that arrives after this check pends the interrupt, and WFI returns
+        // at once on a pending interrupt even with PRIMASK set.
+        if !self.rx_full() {
+            cortex_m::asm::wfi();
+        }
+        self.write_reg(CTRL, CTRL_TX_EN | CTRL_RX_EN);
+        self.write_reg(INTCLEAR, INT_RX);
+        NVIC::unpend(Irq(RX_IRQ));
+        if unmasked {
+            // SAFETY: interrupts were enabled on entry and masked only here, so no
+            // critical section is broken; pending handlers (SysTick) run now.
+            unsafe { cortex_m::interrupt::enable() };
         }
     }
 }
