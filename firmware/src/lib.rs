@@ -35,7 +35,7 @@ mod exit;
 mod link;
 #[cfg(any(target_os = "none", test))]
 mod meter;
-#[cfg(all(target_os = "none", feature = "f405"))]
+#[cfg(target_os = "none")]
 mod serial;
 
 /// What a firmware binary does on the host: says how to build `bin` for the target (with

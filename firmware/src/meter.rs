@@ -265,14 +265,15 @@ mod target {
         }
 
         /// Logs the `QUIT` line: uptime, the registration, worst cases, peak stack (scanned
-        /// now) and the calibration.
+        /// now), the calibration and the serial port's error counts.
         pub fn log_quit(&self) {
             let c = &CostW {
                 peak_stack_bytes: cost::peak_stack_bytes() as u32,
                 ..self.cost
             };
+            let serial = crate::serial::counters();
             defmt::info!(
-                "QUIT: uptime {=u64} ticks; registration {=u64} instructions in {=u32} steps (worst step {=u32}); worst loop turn {=u32}, worst frame {=u32} instructions; peak stack {=u32} of {=usize} B; spin calibration {=u64} ticks",
+                "QUIT: uptime {=u64} ticks; registration {=u64} instructions in {=u32} steps (worst step {=u32}); worst loop turn {=u32}, worst frame {=u32} instructions; peak stack {=u32} of {=usize} B; spin calibration {=u64} ticks; serial: {=u32} overruns, {=u32} framing errors, {=u32} bytes dropped on a full queue",
                 self.boot.elapsed_ticks(),
                 c.registration_instructions,
                 c.registration_calls,
@@ -281,7 +282,10 @@ mod target {
                 c.worst_receive_instructions,
                 c.peak_stack_bytes,
                 cost::stack_size_bytes(),
-                self.cal.spin_ticks
+                self.cal.spin_ticks,
+                serial.overruns,
+                serial.framing,
+                serial.dropped
             );
         }
     }
