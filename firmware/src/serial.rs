@@ -21,26 +21,27 @@ use critical_section::Mutex;
 use heapless::spsc::{Consumer, Producer, Queue};
 use static_cell::ConstStaticCell;
 
-/// Slots of the RX queue (capacity one less: 255 bytes).
+/// Slots of the RX queue (capacity one less: 511 bytes).
 ///
 /// Derivation: the loop's receive step drains the queue at least every other turn
 /// (it is skipped only in the turn after one that took a frame), and a turn lasts at
-/// most 168,000 instructions, 1 ms at 168 MHz, measured (`meter::LONG_CALL`). At the
-/// recommended 115,200 baud (10 bits a byte, 11.52 bytes/ms) at most 2 × 11.52 = 24
-/// bytes arrive between two drains. Bytes after the first complete frame stay queued
-/// for the next receive turn; the longest frame is `wire::MAX_FRAME` = 604 bytes, but
-/// it is read into the frame receiver's own 604-byte buffer as it arrives, so the queue
-/// holds only the backlog. 256 slots leave ten times the 24 bytes for bursts of small
-/// frames (the host test `link_budget` replays the procedure's real frames at the baud
-/// rate against this capacity) and cost 256 B of the 2 KiB stack margin.
-pub const RX_QUEUE: usize = 256;
+/// most 168,000 instructions, 1 ms at 168 MHz (`meter::LONG_CALL`, enforced by
+/// `ribreg hil`; measured worst 139,089 on the F405). At the recommended 921,600 baud
+/// (10 bits a byte, 92.16 bytes/ms) at most 2 × 92.16 = 185 bytes arrive back to back
+/// between two drains. A drain stops at the end of the first complete frame, so the
+/// bytes of the next frames wait too: replaying the default sweep's real frames (up to
+/// `wire::MAX_FRAME` = 604 bytes) at that rate with every turn at the budget, the host
+/// test `link_budget` finds at most 327 bytes queued. 512 slots hold that with 1.56×
+/// margin for 512 B of RAM, taken from the stack (whose margin stays above 2 KiB).
+pub const RX_QUEUE: usize = 512;
 
 /// Slots of the TX queue (capacity 255 bytes).
 ///
 /// Derivation: the flush step moves encoded replies in as far as they fit and keeps the
 /// rest of a frame for the next turn, so the queue need not hold a whole `MAX_FRAME`.
-/// At 115,200 baud 255 bytes drain in 22 ms; the replies of one 10 ms period while
-/// executing (a setpoint, 46 bytes, and an ack, 12) fit five times over.
+/// At 921,600 baud 255 bytes drain in 2.8 ms (22 ms at 115,200); the replies of one
+/// 10 ms period while executing (a setpoint, 49 bytes, and an ack, 13) fit four times
+/// over.
 pub const TX_QUEUE: usize = 256;
 
 /// A receive error the UART reported (the byte is lost).
