@@ -35,14 +35,15 @@ use static_cell::ConstStaticCell;
 /// margin for 512 B of RAM, taken from the stack (whose margin stays above 2 KiB).
 pub const RX_QUEUE: usize = 512;
 
-/// Slots of the TX queue (capacity 255 bytes).
+/// Slots of the TX queue (capacity 127 bytes).
 ///
 /// Derivation: the flush step moves encoded replies in as far as they fit and keeps the
-/// rest of a frame for the next turn, so the queue need not hold a whole `MAX_FRAME`.
-/// At 921,600 baud 255 bytes drain in 2.8 ms (22 ms at 115,200); the replies of one
-/// 10 ms period while executing (a setpoint, 49 bytes, and an ack, 13) fit four times
-/// over.
-pub const TX_QUEUE: usize = 256;
+/// rest of a frame (up to `wire::MAX_FRAME`) in the link for the next turn, so the queue
+/// need not hold a whole frame. The busiest period's replies, while executing a setpoint
+/// (49 bytes) and an ack (13) every 10 ms, fit twice over; 127 bytes drain in 1.4 ms at
+/// 921,600 baud, so a turn of at most 1 ms finds room again. Every byte here is taken
+/// from the stack, whose margin on the F405 was 2.4 KiB with 256 slots.
+pub const TX_QUEUE: usize = 128;
 
 /// A receive error the UART reported (the byte is lost).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
