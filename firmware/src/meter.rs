@@ -1,8 +1,8 @@
 //! Cost bookkeeping of the main loop: [`Meter`] times every controller call and every
 //! loop turn with the SysTick counter of [`crate::cost`], keeps the worst cases and the
-//! registration's total for `Command::Cost`, the registration's calls per stage
-//! ([`StageCosts`]) for the `QUIT` report, and logs any call or turn above
-//! [`LONG_CALL`] when it happens.
+//! registration's total (and the serial error counts) for `Command::Cost`, the
+//! registration's calls per stage ([`StageCosts`]) for the `QUIT` report, and logs any
+//! call or turn above [`LONG_CALL`] when it happens.
 //!
 //! The measured regions are exactly the controller call (a receive, or a poll with its
 //! clock reading) and the whole turn, so the figures do not depend on how the loop around
@@ -256,6 +256,10 @@ mod target {
             if self.turns % 256 == 1 {
                 self.cost.peak_stack_bytes = cost::peak_stack_bytes() as u32;
             }
+            let serial = crate::serial::counters();
+            self.cost.serial_overruns = serial.overruns;
+            self.cost.serial_framing_errors = serial.framing;
+            self.cost.serial_dropped_bytes = serial.dropped;
             controller.set_cost(self.cost);
         }
 

@@ -7,7 +7,7 @@
 //! * **RX**: each received byte is pushed into a `heapless::spsc::Queue` of
 //!   [`RX_QUEUE`] slots; the loop's receive step pops them. A byte that finds the queue
 //!   full is dropped and counted; overrun (ORE) and framing (FE, noise, parity) errors
-//!   are counted ([`counters`]).
+//!   are counted ([`counters`]; reported on `Command::Cost` and at `QUIT`).
 //! * **TX**: the flush step pushes encoded replies into a queue of [`TX_QUEUE`] slots
 //!   as far as they fit and pends the UART's interrupt; the handler writes while the
 //!   transmitter has room and keeps its TX interrupt enabled while bytes remain.

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 /// Protocol magic, ASCII "RBRG" read as a little-endian `u32`.
 pub const MAGIC: u32 = u32::from_le_bytes(*b"RBRG");
 /// Protocol version; bumped on any change of a message's encoding.
-pub const VERSION: u16 = 1;
+pub const VERSION: u16 = 2;
 
 /// Pixels travel as `u16` in 1/16 pixel: up to 4095.94 px at 0.0625 px resolution.
 pub const PIXEL_SUBDIVISIONS: f32 = 16.0;
@@ -301,8 +301,14 @@ pub struct CostW {
     pub worst_receive_instructions: u32,
     /// Peak stack use, bytes.
     pub peak_stack_bytes: u32,
+    /// UART receive overruns (a byte lost in the receive register) since boot.
+    pub serial_overruns: u32,
+    /// UART framing, noise and parity errors since boot.
+    pub serial_framing_errors: u32,
+    /// Bytes received while the firmware's RX queue was full (dropped) since boot.
+    pub serial_dropped_bytes: u32,
 }
-const COST_W: usize = U64 + 5 * U32;
+const COST_W: usize = U64 + 8 * U32;
 
 /// Controller → robot PC.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

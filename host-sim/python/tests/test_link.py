@@ -115,7 +115,7 @@ def test_messages_the_protocol_cannot_carry_are_value_errors():
 def test_the_in_process_session_handshakes_and_records_refusals():
     s = Session.in_process()
     ack = s.handshake()
-    assert ack == HelloAck(0x47524252, 1, MAX_FRAME)
+    assert ack == HelloAck(0x47524252, 2, MAX_FRAME)
     assert s.simulated_clock
     # Registering without a template is refused by the application, not re-sent.
     seq = s.send(Command(CommandKind.REGISTER))

@@ -167,13 +167,17 @@ fn print_report(r: &HilReport, budgets: Option<&(Board, Budgets)>) {
         let board = budgets.map_or(String::new(), |(b, _)| format!(" on {b}"));
         println!(
             "controller cost{board} (instructions, QEMU -icount): registration {} in {} steps (worst step {}), \
-             worst control-loop turn {}, worst frame handling {}; peak stack {} B",
+             worst control-loop turn {}, worst frame handling {}; peak stack {} B; serial: {} overruns, \
+             {} framing errors, {} bytes dropped",
             c.registration_instructions,
             c.registration_calls,
             c.worst_step_instructions,
             c.worst_call_instructions,
             c.worst_receive_instructions,
-            c.peak_stack_bytes
+            c.peak_stack_bytes,
+            c.serial_overruns,
+            c.serial_framing_errors,
+            c.serial_dropped_bytes
         );
     }
     if let Some((_, b)) = budgets {

@@ -707,6 +707,9 @@ mod tests {
             worst_step_instructions: 138_600,
             worst_receive_instructions: 101_100,
             peak_stack_bytes: peak_stack,
+            serial_overruns: 0,
+            serial_framing_errors: 0,
+            serial_dropped_bytes: 0,
         }
     }
 
