@@ -3,13 +3,14 @@
 //! `ribreg hil`, run by `.ci/run`.)
 //!
 //! Builds `ribreg-firmware` for `thumbv7em-none-eabihf` (or takes `RIBREG_FIRMWARE_ELF`)
-//! and needs `qemu-system-arm`. Without QEMU the test is skipped with a message, unless
+//! and needs `qemu-system-arm`; the same again for the STM32F405 build under
+//! `-machine netduinoplus2` (`ribreg-firmware-f405`, or `RIBREG_FIRMWARE_F405_ELF`). Without QEMU the test is skipped with a message, unless
 //! `RIBREG_REQUIRE_QEMU` is set (CI sets it to 1), which makes a missing QEMU a failure.
 
 use ribreg_core::wire::{
     self, Command, FromController, NackCode, State, ToController, MAGIC, MAX_FRAME, VERSION,
 };
-use ribreg_sim::hil::emulator::{self as qemu, Emulator, Icount, Options, QemuError};
+use ribreg_sim::hil::emulator::{self as qemu, Board, Emulator, Icount, Options, QemuError};
 use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
@@ -19,8 +20,9 @@ fn qemu_required() -> bool {
     std::env::var("RIBREG_REQUIRE_QEMU").is_ok_and(|v| !v.is_empty() && v != "0")
 }
 
-/// The firmware ELF; `None` (test skipped) only if QEMU is missing and not required.
-fn firmware() -> Option<PathBuf> {
+/// The firmware ELF for `board`; `None` (test skipped) only if QEMU is missing and not
+/// required.
+fn firmware(board: Board) -> Option<PathBuf> {
     let program = PathBuf::from(qemu::QEMU);
     if !qemu::qemu_available(&program) {
         let err = QemuError::NotInstalled { program };
@@ -30,7 +32,7 @@ fn firmware() -> Option<PathBuf> {
         eprintln!("SKIPPED (set RIBREG_REQUIRE_QEMU=1 to make this a failure): {err}");
         return None;
     }
-    Some(qemu::firmware_elf().unwrap_or_else(|e| panic!("{e}")))
+    Some(qemu::firmware_elf_for(board).unwrap_or_else(|e| panic!("{e}")))
 }
 
 fn send(serial: &mut TcpStream, seq: u16, msg: &ToController) {
@@ -55,15 +57,24 @@ fn next(serial: &mut TcpStream, rx: &mut wire::Receiver) -> FromController {
 
 #[test]
 fn firmware_speaks_the_protocol() {
-    let Some(elf) = firmware() else { return };
-    let log = Path::new(env!("CARGO_TARGET_TMPDIR")).join("qemu_controller.defmt");
+    speaks_the_protocol(Board::Mps2An386);
+}
+
+#[test]
+fn f405_firmware_speaks_the_protocol() {
+    speaks_the_protocol(Board::F405);
+}
+
+fn speaks_the_protocol(board: Board) {
+    let Some(elf) = firmware(board) else { return };
+    let log = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("qemu_controller-{board}.defmt"));
     let opts = Options {
         icount: Some(Icount {
             shift: 0,
             sleep: true,
         }),
         semihosting_log: Some(log.clone()),
-        ..Options::default()
+        ..board.options()
     };
     let mut emu = Emulator::start(&elf, &opts).unwrap_or_else(|e| panic!("{e}"));
     eprintln!(
