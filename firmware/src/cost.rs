@@ -4,18 +4,21 @@
 //! # Instruction counts
 //!
 //! DWT CYCCNT reads 0 under QEMU 7.2, so the counter is SysTick clocked from the core
-//! (`CLKSOURCE = 1`, 25 MHz on MPS2), free-running with a 1 ms period (25,000 ticks) and
-//! extended to 64 bits by counting wraps in the SysTick exception. The 1 ms wrap is also
-//! the controller's wake-up: while it executes it sleeps in WFI between bytes, so under
-//! `-icount ...,sleep=on` its clock follows the host's instead of the emulator's speed.
+//! (`CLKSOURCE = 1`, [`CORE_CLOCK_HZ`]: 25 MHz on MPS2, 168 MHz on the F405),
+//! free-running with a 1 ms period and extended to 64 bits by counting wraps in the
+//! SysTick exception. The 1 ms wrap is also the controller's wake-up: while it executes
+//! it sleeps in WFI between bytes, so under `-icount ...,sleep=on` its clock follows the
+//! host's instead of the emulator's speed.
 //!
 //! Under `qemu-system-arm -icount shift=0,align=off,sleep=off` every guest instruction
-//! advances the virtual clock by 2^0 ns, and a 25 MHz tick lasts 40 ns, so one tick is
-//! [`INSTRUCTIONS_PER_TICK`] = 40 instructions, deterministically. This was measured, not
-//! assumed: at boot the firmware times [`spin`] (exactly 2 instructions per iteration) and
-//! reports the ticks; the host test `qemu_echo` checks 20,000 instructions read as
-//! 500 ticks. The resolution is therefore one tick, 40 instructions, and a
-//! [`Stamp`]/[`Stamp::elapsed_ticks`] pair itself costs about one tick.
+//! advances the virtual clock by 2^0 ns: a 25 MHz tick (40 ns) is 40 instructions, a
+//! 168 MHz tick about 5.95, deterministically. The ratio is calibrated at boot, not
+//! assumed ([`Cost::calibrate`]): the firmware times [`spin`] (exactly 2 instructions per
+//! iteration) for N and 2N iterations, and the difference of the two, free of the call
+//! and stamp overhead, gives the instructions per tick ([`instructions_from`]); the host
+//! test `qemu_echo` checks 20,000 instructions read as 500 ticks on MPS2. The resolution
+//! is one tick (40 instructions on MPS2, about 6 on the F405), and a
+//! [`Stamp`]/[`Stamp::elapsed_ticks`] pair itself costs about one MPS2 tick.
 //! Without `-icount` the ticks follow the host's clock and say nothing about cost.
 //! Instructions are not cycles: quote the count and the cycles per instruction assumed.
 //!
@@ -36,18 +39,27 @@
 //! longer painted. A frame that happens to store 0xCCCC_CCCC at its deepest word makes
 //! the figure one word short; nothing else is approximate.
 
-/// SysTick reload value: the counter runs 24,999 down to 0, a period of 1 ms at 25 MHz.
-pub const RELOAD: u32 = 24_999;
+/// SysTick clock (the core clock), Hz: the board's ([`crate::board::SYSTICK_HZ`]).
+pub const CORE_CLOCK_HZ: u32 = crate::board::SYSTICK_HZ;
+
+/// SysTick reload value: a period of 1 ms (24,999 down to 0 at 25 MHz, 167,999 at
+/// 168 MHz; both fit the 24-bit counter).
+pub const RELOAD: u32 = CORE_CLOCK_HZ / 1_000 - 1;
+const _: () = assert!(RELOAD <= 0x00FF_FFFF);
 
 /// Ticks in one SysTick period.
 pub const PERIOD_TICKS: u64 = RELOAD as u64 + 1;
 
-/// SysTick clock on MPS2 (the core clock), Hz.
-pub const CORE_CLOCK_HZ: u32 = 25_000_000;
+/// Instructions in `ticks` SysTick ticks, given that `cal_instructions` instructions took
+/// `cal_ticks` ticks (the boot calibration; a zero `cal_ticks` counts as one).
+pub const fn instructions_from(ticks: u64, cal_instructions: u32, cal_ticks: u32) -> u64 {
+    let per = if cal_ticks == 0 { 1 } else { cal_ticks as u64 };
+    ticks * cal_instructions as u64 / per
+}
 
-/// Guest instructions per SysTick tick under `-icount shift=0` (1 ns per instruction,
-/// 40 ns per 25 MHz tick). Valid for that emulator setting only.
-pub const INSTRUCTIONS_PER_TICK: u64 = 40;
+/// The calibration assumed until [`Cost::calibrate`] runs: `-icount shift=0`'s 1 ns per
+/// instruction over one second, `(instructions, ticks)` = (10^9, [`CORE_CLOCK_HZ`]).
+pub const NOMINAL_CALIBRATION: (u32, u32) = (1_000_000_000, CORE_CLOCK_HZ);
 
 /// The word cortex-m-rt paints the stack with (`cortex_m_rt::STACK_PAINT_VALUE`).
 pub const STACK_PAINT: u32 = 0xCCCC_CCCC;
@@ -128,6 +140,10 @@ mod target {
     /// SysTick periods completed, counted by the SysTick exception.
     static WRAPS: AtomicU32 = AtomicU32::new(0);
 
+    /// Instructions and ticks of the boot calibration ([`Cost::calibrate`]).
+    static CAL_INSTRUCTIONS: AtomicU32 = AtomicU32::new(NOMINAL_CALIBRATION.0);
+    static CAL_TICKS: AtomicU32 = AtomicU32::new(NOMINAL_CALIBRATION.1);
+
     #[exception]
     fn SysTick() {
         WRAPS.fetch_add(1, Ordering::Relaxed);
@@ -162,6 +178,22 @@ mod target {
             Stamp::at(now_ticks())
         }
 
+        /// From now on `instructions` instructions take `ticks` ticks (measured at boot).
+        pub fn calibrate(instructions: u32, ticks: u32) {
+            CAL_INSTRUCTIONS.store(instructions, Ordering::Relaxed);
+            CAL_TICKS.store(ticks, Ordering::Relaxed);
+        }
+
+        /// Instructions in `ticks` ticks, by the calibration.
+        #[inline]
+        pub fn instructions(ticks: u64) -> u64 {
+            instructions_from(
+                ticks,
+                CAL_INSTRUCTIONS.load(Ordering::Relaxed),
+                CAL_TICKS.load(Ordering::Relaxed),
+            )
+        }
+
         /// Runs `f` and returns its result with the ticks it took.
         #[inline]
         pub fn measure<R>(f: impl FnOnce() -> R) -> (R, u64) {
@@ -190,11 +222,11 @@ mod target {
             self.ticks_until(Cost::start())
         }
 
-        /// Instructions from this stamp to now, assuming `-icount shift=0`
-        /// ([`INSTRUCTIONS_PER_TICK`]); resolution one tick.
+        /// Instructions from this stamp to now, by the boot calibration (valid under
+        /// `-icount shift=0`); resolution one tick.
         #[inline]
         pub fn elapsed_instructions(self) -> u64 {
-            self.elapsed_ticks() * INSTRUCTIONS_PER_TICK
+            Cost::instructions(self.elapsed_ticks())
         }
     }
 
@@ -315,10 +347,27 @@ mod tests {
         assert_eq!(a.ticks_until(b), 900);
         assert_eq!(b.ticks_until(a), 0);
         assert_eq!(b.ticks(), 1_000);
+    }
+
+    #[test]
+    fn instructions_follow_the_calibration() {
+        // MPS2: 20,000 instructions in 500 ticks, 40 a tick.
+        assert_eq!(instructions_from(3_475, 20_000, 500), 139_000);
+        // F405 under -icount shift=0: 168 MHz ticks, 1 ns instructions, 125/21 a tick.
         assert_eq!(
-            INSTRUCTIONS_PER_TICK * u64::from(CORE_CLOCK_HZ),
+            instructions_from(168_000, 1_000_000_000, 168_000_000),
+            1_000_000
+        );
+        assert_eq!(instructions_from(28_224, 20_000, 3_360), 168_000);
+        // The nominal calibration is 1 ns per instruction on the board's clock.
+        let (i, t) = NOMINAL_CALIBRATION;
+        assert_eq!(
+            instructions_from(u64::from(CORE_CLOCK_HZ), i, t),
             1_000_000_000
         );
+        assert_eq!(instructions_from(5, 7, 0), 35);
+        // A 1 ms period at the board's clock.
+        assert_eq!(u64::from(CORE_CLOCK_HZ) / 1_000, PERIOD_TICKS);
     }
 
     #[test]

@@ -18,15 +18,15 @@ pub use target::*;
 #[cfg(target_os = "none")]
 mod target {
     use crate::meter::Meter;
-    use crate::uart::Uart0;
     use cortex_m_rt::{exception, ExceptionFrame};
     use cortex_m_semihosting::debug;
     use embedded_io::Write;
 
-    /// The end of a run on `QUIT`: the stages, the replies still in the UART, the
-    /// `QUIT` line, then the emulator exits with success.
-    pub fn quit(uart: &mut Uart0, meter: &Meter) -> ! {
+    /// The end of a run on `QUIT`: the stages, the reply still going out (`rest`) and
+    /// what the port still holds, the `QUIT` line, then the emulator exits with success.
+    pub fn quit(uart: &mut impl Write, rest: &[u8], meter: &Meter) -> ! {
         meter.log_stages();
+        let _ = uart.write_all(rest);
         let _ = uart.flush();
         meter.log_quit();
         exit(debug::EXIT_SUCCESS)

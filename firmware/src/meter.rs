@@ -1,8 +1,8 @@
 //! Cost bookkeeping of the main loop: [`Meter`] times every controller call and every
 //! loop turn with the SysTick counter of [`crate::cost`], keeps the worst cases and the
-//! registration's total for `Command::Cost`, the registration's calls per stage
-//! ([`StageCosts`]) for the `QUIT` report, and logs any call or turn above
-//! [`LONG_CALL`] when it happens.
+//! registration's total (and the serial error counts) for `Command::Cost`, the
+//! registration's calls per stage ([`StageCosts`]) for the `QUIT` report, and logs any
+//! call or turn above [`LONG_CALL`] when it happens.
 //!
 //! The measured regions are exactly the controller call (a receive, or a poll with its
 //! clock reading) and the whole turn, so the figures do not depend on how the loop around
@@ -12,7 +12,8 @@
 /// logged.
 pub const LONG_CALL: u64 = 168_000;
 
-/// Iterations of `cost::spin` timed at boot (2 instructions each).
+/// Iterations of `cost::spin` timed at boot (2 instructions each), once and twice over:
+/// the difference, 20,000 instructions, is 500 ticks on MPS2 and about 3,360 on the F405.
 pub const CALIBRATION_ITERATIONS: u32 = 10_000;
 
 /// An instruction count as reported on the wire (`u32`, saturating).
@@ -93,20 +94,23 @@ mod target {
         overhead_ticks: u64,
         /// Ticks around `spin(CALIBRATION_ITERATIONS)`.
         spin_ticks: u64,
-        /// The same in instructions, assuming `-icount shift=0`.
-        spin_instructions: u64,
+        /// Ticks of `2 * CALIBRATION_ITERATIONS` instructions: `spin` of twice the
+        /// iterations minus `spin` of once, so the call and stamps cancel out.
+        net_ticks: u64,
     }
 
+    /// Times `spin` and sets the counter's instructions per tick from it
+    /// ([`Cost::calibrate`]).
     fn calibrate() -> Calibration {
         let ((), overhead_ticks) = Cost::measure(|| ());
-        let stamp = Cost::start();
-        cost::spin(core::hint::black_box(CALIBRATION_ITERATIONS));
-        let spin_instructions = stamp.elapsed_instructions();
-        let spin_ticks = spin_instructions / cost::INSTRUCTIONS_PER_TICK;
+        let spin = |n: u32| Cost::measure(|| cost::spin(core::hint::black_box(n))).1;
+        let spin_ticks = spin(CALIBRATION_ITERATIONS);
+        let net_ticks = spin(2 * CALIBRATION_ITERATIONS).saturating_sub(spin_ticks);
+        Cost::calibrate(2 * CALIBRATION_ITERATIONS, clamp(net_ticks.max(1)));
         Calibration {
             overhead_ticks,
             spin_ticks,
-            spin_instructions,
+            net_ticks,
         }
     }
 
@@ -134,17 +138,20 @@ mod target {
             let cal = calibrate();
             let (stack_lo, stack_hi) = cost::stack_bounds();
             defmt::info!(
-                "ribreg-firmware up at tick {=u64}; stack {=usize:#x}..{=usize:#x} ({=usize} B)",
+                "ribreg-firmware on {=str} up at tick {=u64}; stack {=usize:#x}..{=usize:#x} ({=usize} B)",
+                crate::board::NAME,
                 boot.ticks(),
                 stack_lo,
                 stack_hi,
                 stack_hi - stack_lo
             );
             defmt::info!(
-                "spin of {=u32} instructions = {=u64} ticks (= {=u64} instructions if run with -icount shift=0); empty region = {=u64} ticks",
+                "spin of {=u32} instructions = {=u64} ticks, {=u32} more = {=u64} ticks more: {=u64} instructions per 1000 ticks under -icount shift=0; empty region = {=u64} ticks",
                 2 * CALIBRATION_ITERATIONS,
                 cal.spin_ticks,
-                cal.spin_instructions,
+                2 * CALIBRATION_ITERATIONS,
+                cal.net_ticks,
+                Cost::instructions(1_000),
                 cal.overhead_ticks
             );
             Meter {
@@ -249,6 +256,10 @@ mod target {
             if self.turns % 256 == 1 {
                 self.cost.peak_stack_bytes = cost::peak_stack_bytes() as u32;
             }
+            let serial = crate::serial::counters();
+            self.cost.serial_overruns = serial.overruns;
+            self.cost.serial_framing_errors = serial.framing;
+            self.cost.serial_dropped_bytes = serial.dropped;
             controller.set_cost(self.cost);
         }
 
@@ -258,14 +269,15 @@ mod target {
         }
 
         /// Logs the `QUIT` line: uptime, the registration, worst cases, peak stack (scanned
-        /// now) and the calibration.
+        /// now), the calibration and the serial port's error counts.
         pub fn log_quit(&self) {
             let c = &CostW {
                 peak_stack_bytes: cost::peak_stack_bytes() as u32,
                 ..self.cost
             };
+            let serial = crate::serial::counters();
             defmt::info!(
-                "QUIT: uptime {=u64} ticks; registration {=u64} instructions in {=u32} steps (worst step {=u32}); worst loop turn {=u32}, worst frame {=u32} instructions; peak stack {=u32} of {=usize} B; spin calibration {=u64} ticks",
+                "QUIT: uptime {=u64} ticks; registration {=u64} instructions in {=u32} steps (worst step {=u32}); worst loop turn {=u32}, worst frame {=u32} instructions; peak stack {=u32} of {=usize} B; spin calibration {=u64} ticks; serial: {=u32} overruns, {=u32} framing errors, {=u32} bytes dropped on a full queue",
                 self.boot.elapsed_ticks(),
                 c.registration_instructions,
                 c.registration_calls,
@@ -274,7 +286,10 @@ mod target {
                 c.worst_receive_instructions,
                 c.peak_stack_bytes,
                 cost::stack_size_bytes(),
-                self.cal.spin_ticks
+                self.cal.spin_ticks,
+                serial.overruns,
+                serial.framing,
+                serial.dropped
             );
         }
     }

@@ -44,9 +44,9 @@ pub mod session;
 pub use faults::{FaultInjector, FaultStats, Faults};
 pub use port::{connect_tcp, open_serial, InProcess, Port, Stream};
 pub use procedure::{
-    emulator_options, prepare, run, run_emulated, run_with, Budgets, Emulated, HilReport, Prepared,
-    RunOptions, WaypointOutcome, MAX_ACCEL_MM_S2, MAX_SPEED_MM_S, REGISTRATION_BUDGET_INSTRUCTIONS,
-    STACK_HEADROOM_BYTES, TOLERANCE_MM, TURN_BUDGET_INSTRUCTIONS,
+    board_emulator_options, emulator_options, prepare, run, run_emulated, run_with, Budgets,
+    Emulated, HilReport, Prepared, RunOptions, WaypointOutcome, MAX_ACCEL_MM_S2, MAX_SPEED_MM_S,
+    REGISTRATION_BUDGET_INSTRUCTIONS, STACK_HEADROOM_BYTES, TOLERANCE_MM, TURN_BUDGET_INSTRUCTIONS,
 };
 pub use robot::{ROBOT_LAG_S, STANDOFF_MM};
 pub use session::{LinkStats, Session, RESEND_AFTER, WINDOW};

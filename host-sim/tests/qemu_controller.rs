@@ -3,14 +3,15 @@
 //! `ribreg hil`, run by `.ci/run`.)
 //!
 //! Builds `ribreg-firmware` for `thumbv7em-none-eabihf` (or takes `RIBREG_FIRMWARE_ELF`)
-//! and needs `qemu-system-arm`. Without QEMU the test is skipped with a message, unless
+//! and needs `qemu-system-arm`; the same again for the STM32F405 build under
+//! `-machine netduinoplus2` (`ribreg-firmware-f405`, or `RIBREG_FIRMWARE_F405_ELF`). Without QEMU the test is skipped with a message, unless
 //! `RIBREG_REQUIRE_QEMU` is set (CI sets it to 1), which makes a missing QEMU a failure.
 
 use ribreg_core::wire::{
     self, Command, FromController, NackCode, State, ToController, MAGIC, MAX_FRAME, VERSION,
 };
-use ribreg_sim::hil::emulator::{self as qemu, Emulator, Icount, Options, QemuError};
-use std::io::{Read, Write};
+use ribreg_sim::hil::emulator::{self as qemu, Board, Emulator, Icount, Options, QemuError};
+use std::io::{ErrorKind, Read, Write};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -19,8 +20,9 @@ fn qemu_required() -> bool {
     std::env::var("RIBREG_REQUIRE_QEMU").is_ok_and(|v| !v.is_empty() && v != "0")
 }
 
-/// The firmware ELF; `None` (test skipped) only if QEMU is missing and not required.
-fn firmware() -> Option<PathBuf> {
+/// The firmware ELF for `board`; `None` (test skipped) only if QEMU is missing and not
+/// required.
+fn firmware(board: Board) -> Option<PathBuf> {
     let program = PathBuf::from(qemu::QEMU);
     if !qemu::qemu_available(&program) {
         let err = QemuError::NotInstalled { program };
@@ -30,7 +32,7 @@ fn firmware() -> Option<PathBuf> {
         eprintln!("SKIPPED (set RIBREG_REQUIRE_QEMU=1 to make this a failure): {err}");
         return None;
     }
-    Some(qemu::firmware_elf().unwrap_or_else(|e| panic!("{e}")))
+    Some(qemu::firmware_elf_for(board).unwrap_or_else(|e| panic!("{e}")))
 }
 
 fn send(serial: &mut TcpStream, seq: u16, msg: &ToController) {
@@ -39,31 +41,73 @@ fn send(serial: &mut TcpStream, seq: u16, msg: &ToController) {
     serial.write_all(&buf[..n]).unwrap();
 }
 
-/// The next controller message (20 s at most).
+/// The next controller message (20 s at most; the socket has a read timeout so the
+/// deadline is checked even when the firmware says nothing).
 fn next(serial: &mut TcpStream, rx: &mut wire::Receiver) -> FromController {
-    let deadline = Instant::now() + Duration::from_secs(20);
+    try_next(serial, rx, Duration::from_secs(20)).expect("no reply from the firmware")
+}
+
+fn try_next(
+    serial: &mut TcpStream,
+    rx: &mut wire::Receiver,
+    wait: Duration,
+) -> Option<FromController> {
+    let deadline = Instant::now() + wait;
     let mut byte = [0u8; 1];
     while Instant::now() < deadline {
-        if serial.read(&mut byte).unwrap() == 1 {
-            if let Some(Ok(frame)) = rx.push(byte[0]) {
-                return wire::decode::<FromController>(frame).unwrap().1;
+        match serial.read(&mut byte) {
+            Ok(1) => {
+                if let Some(Ok(frame)) = rx.push(byte[0]) {
+                    return Some(wire::decode::<FromController>(frame).unwrap().1);
+                }
             }
+            Ok(_) => panic!("the firmware closed its serial port"),
+            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {}
+            Err(e) => panic!("serial read: {e}"),
         }
     }
-    panic!("no reply from the firmware");
+    None
+}
+
+/// Sends `msg` until the firmware answers, then lets the duplicate answers drain: bytes
+/// that arrive before the firmware has enabled its UART are dropped (QEMU's STM32 USART
+/// model, like the real part, discards them), which a host meets only at start-up.
+fn first_reply(
+    serial: &mut TcpStream,
+    rx: &mut wire::Receiver,
+    msg: &ToController,
+) -> FromController {
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while Instant::now() < deadline {
+        send(serial, 0, msg);
+        if let Some(reply) = try_next(serial, rx, Duration::from_millis(500)) {
+            while try_next(serial, rx, Duration::from_millis(500)).is_some() {}
+            return reply;
+        }
+    }
+    panic!("no reply from the firmware within 20 s");
 }
 
 #[test]
 fn firmware_speaks_the_protocol() {
-    let Some(elf) = firmware() else { return };
-    let log = Path::new(env!("CARGO_TARGET_TMPDIR")).join("qemu_controller.defmt");
+    speaks_the_protocol(Board::Mps2An386);
+}
+
+#[test]
+fn f405_firmware_speaks_the_protocol() {
+    speaks_the_protocol(Board::F405);
+}
+
+fn speaks_the_protocol(board: Board) {
+    let Some(elf) = firmware(board) else { return };
+    let log = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("qemu_controller-{board}.defmt"));
     let opts = Options {
         icount: Some(Icount {
             shift: 0,
             sleep: true,
         }),
         semihosting_log: Some(log.clone()),
-        ..Options::default()
+        ..board.options()
     };
     let mut emu = Emulator::start(&elf, &opts).unwrap_or_else(|e| panic!("{e}"));
     eprintln!(
@@ -72,12 +116,18 @@ fn firmware_speaks_the_protocol() {
         elf.display()
     );
     let mut serial = emu.serial().try_clone().unwrap();
+    serial
+        .set_read_timeout(Some(Duration::from_millis(50)))
+        .unwrap();
     let mut rx = wire::Receiver::new();
 
     // Before the handshake: refused.
-    send(&mut serial, 0, &ToController::Command(Command::Status));
     assert!(matches!(
-        next(&mut serial, &mut rx),
+        first_reply(
+            &mut serial,
+            &mut rx,
+            &ToController::Command(Command::Status)
+        ),
         FromController::Nack {
             code: NackCode::Version,
             ..

@@ -181,7 +181,9 @@ WAYPOINT_W = Struct(("index", U8), ("total", U8), ("position", P3), ("quality_mm
 SETPOINT_W = Struct(("t_us", U64), ("position", P3), ("quat", Array(F32, 4)), ("waypoint", U8))
 COST_W = Struct(("registration_instructions", U64), ("registration_calls", U32),
                 ("worst_call_instructions", U32), ("worst_step_instructions", U32),
-                ("worst_receive_instructions", U32), ("peak_stack_bytes", U32))
+                ("worst_receive_instructions", U32), ("peak_stack_bytes", U32),
+                ("serial_overruns", U32), ("serial_framing_errors", U32),
+                ("serial_dropped_bytes", U32))
 REGISTRATION_W = Struct(("hypotheses", U8), ("residual_mm", F32), ("runner_up_mm", F32),
                         ("min_side_span_percent", U8), ("waypoints", U8))
 FROM_CONTROLLER = Enum(
@@ -494,7 +496,7 @@ def cases():
     add("setpoint", "a setpoint", fr, 0x2345,
         {"Setpoint": {"t_us": 987_654_321, "position": p3(), "quat": [f32(0.5), f32(-0.5), f32(0.5), f32(-0.5)],
                       "waypoint": 4}})
-    add("setpoint_max", "the largest controller message: t_us u64::MAX", fr, 0xFFFF,
+    add("setpoint_max", "a setpoint at its largest: t_us u64::MAX", fr, 0xFFFF,
         {"Setpoint": {"t_us": U64_MAX, "position": [F32_MAX, -F32_MAX, -0.0], "quat": [1.0, 0.0, 0.0, 0.0],
                       "waypoint": 255}})
     add("fault_pose_timeout", "Fault::PoseTimeout", fr, 0x7F, {"Fault": "PoseTimeout"})
@@ -503,7 +505,16 @@ def cases():
     add("cost", "measured costs: u64 and u32 varints of several lengths", fr, 0x4000,
         {"Cost": {"registration_instructions": 123_456_789_012, "registration_calls": 1093,
                   "worst_call_instructions": 141_233, "worst_step_instructions": 0,
-                  "worst_receive_instructions": 0xFFFF_FFFF, "peak_stack_bytes": 127}})
+                  "worst_receive_instructions": 0xFFFF_FFFF, "peak_stack_bytes": 127,
+                  "serial_overruns": 0, "serial_framing_errors": 128,
+                  "serial_dropped_bytes": 16_384}})
+    add("cost_max", "the largest controller message (version 2): every cost field at its maximum",
+        fr, 0xFFFF,
+        {"Cost": {"registration_instructions": U64_MAX, "registration_calls": 0xFFFF_FFFF,
+                  "worst_call_instructions": 0xFFFF_FFFF, "worst_step_instructions": 0xFFFF_FFFF,
+                  "worst_receive_instructions": 0xFFFF_FFFF, "peak_stack_bytes": 0xFFFF_FFFF,
+                  "serial_overruns": 0xFFFF_FFFF, "serial_framing_errors": 0xFFFF_FFFF,
+                  "serial_dropped_bytes": 0xFFFF_FFFF}})
     add("registration", "the registration's confidence before its waypoints (version 2)", fr, 0x4001,
         {"Registration": {"hypotheses": 2, "residual_mm": f32(3.575), "runner_up_mm": f32(5.8),
                           "min_side_span_percent": 255, "waypoints": 10}})
@@ -592,7 +603,7 @@ def main():
     by_name = {c["name"]: c for c in doc_cases}
     assert len(bytes.fromhex(by_name["frame_max"]["postcard"])) == max_size(U16) + max_to
     assert by_name["frame_max"]["frame_len"] == max_frame
-    assert len(bytes.fromhex(by_name["setpoint_max"]["postcard"])) == max_size(U16) + max_from
+    assert len(bytes.fromhex(by_name["cost_max"]["postcard"])) == max_size(U16) + max_from
 
     gen = {"script": SCRIPT, "python": platform.python_version()}
     constants = {"magic": MAGIC, "version": VERSION, "crc_check_123456789": crc32(b"123456789"),

@@ -633,16 +633,23 @@ fn from_controller() -> BoxedStrategy<FromController> {
         waypoint,
         setpoint,
         fault.prop_map(FromController::Fault),
-        (u64s(), u32s(), u32s(), u32s(), u32s(), u32s()).prop_map(|(a, b, c, d, e, f)| {
-            FromController::Cost(CostW {
-                registration_instructions: a,
-                registration_calls: b,
-                worst_call_instructions: c,
-                worst_step_instructions: d,
-                worst_receive_instructions: e,
-                peak_stack_bytes: f,
-            })
-        }),
+        (
+            (u64s(), u32s(), u32s(), u32s(), u32s(), u32s()),
+            (u32s(), u32s(), u32s())
+        )
+            .prop_map(|((a, b, c, d, e, f), (g, h, i))| {
+                FromController::Cost(CostW {
+                    registration_instructions: a,
+                    registration_calls: b,
+                    worst_call_instructions: c,
+                    worst_step_instructions: d,
+                    worst_receive_instructions: e,
+                    peak_stack_bytes: f,
+                    serial_overruns: g,
+                    serial_framing_errors: h,
+                    serial_dropped_bytes: i,
+                })
+            }),
         (any::<u8>(), f32s(), f32s(), any::<u8>(), any::<u8>()).prop_map(|(h, r, u, c, w)| {
             FromController::Registration(RegistrationW {
                 hypotheses: h,

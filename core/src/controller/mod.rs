@@ -200,6 +200,9 @@ impl<const VOXELS: usize> Controller<VOXELS> {
                 worst_step_instructions: 0,
                 worst_receive_instructions: 0,
                 peak_stack_bytes: 0,
+                serial_overruns: 0,
+                serial_framing_errors: 0,
+                serial_dropped_bytes: 0,
             },
         }
     }

@@ -325,8 +325,14 @@ pub struct CostW {
     pub worst_receive_instructions: u32,
     /// Peak stack use, bytes.
     pub peak_stack_bytes: u32,
+    /// UART receive overruns (a byte lost in the receive register) since boot.
+    pub serial_overruns: u32,
+    /// UART framing, noise and parity errors since boot.
+    pub serial_framing_errors: u32,
+    /// Bytes received while the firmware's RX queue was full (dropped) since boot.
+    pub serial_dropped_bytes: u32,
 }
-const COST_W: usize = U64 + 5 * U32;
+const COST_W: usize = U64 + 8 * U32;
 
 /// Controller → robot PC.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

@@ -15,7 +15,9 @@
 //! a buffer and optionally a file for `defmt-print -e ELF`. QEMU is killed when the
 //! [`Emulator`] is dropped. [`firmware_elf`] builds the firmware for
 //! `thumbv7em-none-eabihf` (release) and returns the ELF's path, normally
-//! [`FIRMWARE_ELF`] under the workspace root.
+//! [`FIRMWARE_ELF`] under the workspace root. A [`Board`] names the other build: the
+//! STM32F405 under `-machine netduinoplus2` ([`firmware_elf_for`], [`Board::options`];
+//! its first `-serial` is USART1).
 
 use std::fmt;
 use std::fs::File;
@@ -40,6 +42,82 @@ pub const FIRMWARE_PACKAGE: &str = "ribreg-firmware";
 pub const FIRMWARE_ELF: &str = "target/thumbv7em-none-eabihf/release/ribreg-firmware";
 /// Environment variable naming a prebuilt firmware ELF for [`firmware_elf`].
 pub const FIRMWARE_ELF_ENV: &str = "RIBREG_FIRMWARE_ELF";
+
+/// A board the firmware is built for and QEMU emulates.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Board {
+    /// QEMU's `mps2-an386` (Cortex-M4F, CMSDK UART0, SysTick at 25 MHz): the firmware's
+    /// default build, `ribreg-firmware`.
+    #[default]
+    Mps2An386,
+    /// The STM32F405RG under QEMU's `netduinoplus2` (USART1, SysTick at 168 MHz): the
+    /// firmware's `f405` + `qemu` build, `ribreg-firmware-f405`.
+    F405,
+}
+
+impl Board {
+    /// Every board.
+    pub const ALL: [Board; 2] = [Board::Mps2An386, Board::F405];
+
+    /// The name on the command line (`ribreg hil --board NAME`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Board::Mps2An386 => "mps2-an386",
+            Board::F405 => "f405",
+        }
+    }
+
+    /// The board named `name` ([`Board::name`]).
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|b| b.name() == name)
+    }
+
+    /// QEMU's `-machine`.
+    pub fn machine(self) -> &'static str {
+        match self {
+            Board::Mps2An386 => MACHINE,
+            Board::F405 => "netduinoplus2",
+        }
+    }
+
+    /// The firmware binary's name.
+    pub fn binary(self) -> &'static str {
+        match self {
+            Board::Mps2An386 => FIRMWARE_PACKAGE,
+            Board::F405 => "ribreg-firmware-f405",
+        }
+    }
+
+    /// The cargo feature arguments of its build.
+    pub fn cargo_features(self) -> &'static [&'static str] {
+        match self {
+            Board::Mps2An386 => &[],
+            Board::F405 => &["--no-default-features", "--features", "f405,qemu"],
+        }
+    }
+
+    /// The environment variable naming a prebuilt ELF for it.
+    pub fn elf_env(self) -> &'static str {
+        match self {
+            Board::Mps2An386 => FIRMWARE_ELF_ENV,
+            Board::F405 => "RIBREG_FIRMWARE_F405_ELF",
+        }
+    }
+
+    /// [`Options::default`] with this board's machine.
+    pub fn options(self) -> Options {
+        Options {
+            machine: self.machine().to_owned(),
+            ..Options::default()
+        }
+    }
+}
+
+impl fmt::Display for Board {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
 
 /// How to run the emulator.
 #[derive(Clone, Debug)]
@@ -495,7 +573,13 @@ pub fn workspace_root() -> PathBuf {
 /// The firmware ELF: the file named by `RIBREG_FIRMWARE_ELF` if that is set, otherwise
 /// the result of [`build_firmware`].
 pub fn firmware_elf() -> Result<PathBuf, QemuError> {
-    match std::env::var_os(FIRMWARE_ELF_ENV) {
+    firmware_elf_for(Board::Mps2An386)
+}
+
+/// The firmware ELF for `board`: the file named by [`Board::elf_env`] if that is set,
+/// otherwise the result of [`build_firmware_for`].
+pub fn firmware_elf_for(board: Board) -> Result<PathBuf, QemuError> {
+    match std::env::var_os(board.elf_env()) {
         Some(path) if !path.is_empty() => {
             let path = PathBuf::from(path);
             if path.is_file() {
@@ -504,24 +588,30 @@ pub fn firmware_elf() -> Result<PathBuf, QemuError> {
                 Err(QemuError::MissingElf { path })
             }
         }
-        _ => build_firmware(),
+        _ => build_firmware_for(board),
     }
 }
 
 /// Runs `cargo build -p ribreg-firmware --target thumbv7em-none-eabihf --release` in the
 /// workspace and returns the path of the ELF cargo reports (normally [`FIRMWARE_ELF`]).
 pub fn build_firmware() -> Result<PathBuf, QemuError> {
+    build_firmware_for(Board::Mps2An386)
+}
+
+/// [`build_firmware`] for `board`, with its features ([`Board::cargo_features`]).
+pub fn build_firmware_for(board: Board) -> Result<PathBuf, QemuError> {
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    let args = [
+    let mut args = vec![
         "build",
         "-p",
         FIRMWARE_PACKAGE,
         "--target",
         FIRMWARE_TARGET,
         "--release",
-        "--message-format=json-render-diagnostics",
     ];
-    let command = format!("cargo {}", args[..6].join(" "));
+    args.extend_from_slice(board.cargo_features());
+    let command = format!("cargo {}", args.join(" "));
+    args.push("--message-format=json-render-diagnostics");
     let out = Command::new(&cargo)
         .args(args)
         .current_dir(workspace_root())
@@ -541,10 +631,14 @@ pub fn build_firmware() -> Result<PathBuf, QemuError> {
         .lines()
         .filter_map(|line| serde_json::from_str::<serde_json::Value>(line).ok())
         .filter(|msg| {
-            msg["reason"] == "compiler-artifact" && msg["target"]["name"] == FIRMWARE_PACKAGE
+            msg["reason"] == "compiler-artifact" && msg["target"]["name"] == board.binary()
         })
         .find_map(|msg| msg["executable"].as_str().map(PathBuf::from));
-    let path = executable.unwrap_or_else(|| workspace_root().join(FIRMWARE_ELF));
+    let path = executable.unwrap_or_else(|| {
+        workspace_root()
+            .join(FIRMWARE_ELF)
+            .with_file_name(board.binary())
+    });
     if path.is_file() {
         Ok(path)
     } else {
@@ -621,6 +715,24 @@ mod tests {
         assert!(err
             .to_string()
             .contains("install with `apt-get install qemu-system-arm`"));
+    }
+
+    #[test]
+    fn boards_name_their_machine_binary_and_build() {
+        for b in Board::ALL {
+            assert_eq!(Board::from_name(b.name()), Some(b));
+            assert_eq!(b.options().machine, b.machine());
+        }
+        assert_eq!(Board::default(), Board::Mps2An386);
+        assert_eq!(
+            Board::Mps2An386.options().machine,
+            Options::default().machine
+        );
+        assert_eq!(Board::F405.machine(), "netduinoplus2");
+        assert_eq!(Board::F405.binary(), "ribreg-firmware-f405");
+        assert!(Board::F405.cargo_features().contains(&"f405,qemu"));
+        assert!(Board::Mps2An386.cargo_features().is_empty());
+        assert_eq!(Board::from_name("f407"), None);
     }
 
     #[test]

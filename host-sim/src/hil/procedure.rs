@@ -14,7 +14,7 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use super::emulator::{self, QemuError};
+use super::emulator::{self, Board, QemuError};
 use super::port::{InProcess, Port, Stream};
 use super::robot::{self, aim_point, Robot, STANDOFF_MM};
 use super::session::{LinkStats, Session};
@@ -609,6 +609,8 @@ pub fn thousands(n: u64) -> String {
 
 /// The procedure against the emulated controller, and the same in-process.
 pub struct Emulated {
+    /// The board emulated.
+    pub board: Board,
     /// Against the firmware under QEMU (its costs filled in).
     pub report: HilReport,
     /// The same procedure in-process, fault-free.
@@ -632,30 +634,37 @@ impl Emulated {
 /// How [`run_emulated`] runs QEMU: `-icount shift=0,sleep=on`, QEMU's stdout (the
 /// defmt log) also written to `defmt_log` if set.
 pub fn emulator_options(defmt_log: Option<PathBuf>) -> emulator::Options {
+    board_emulator_options(Board::default(), defmt_log)
+}
+
+/// [`emulator_options`] for `board`'s machine.
+pub fn board_emulator_options(board: Board, defmt_log: Option<PathBuf>) -> emulator::Options {
     emulator::Options {
         icount: Some(emulator::Icount {
             shift: 0,
             sleep: true,
         }),
         semihosting_log: defmt_log,
-        ..emulator::Options::default()
+        ..board.options()
     }
 }
 
-/// The procedure against the firmware under QEMU (`-icount shift=0,sleep=on`: SysTick
-/// counts instructions while the firmware works), ended by `QUIT`, then the same
-/// in-process for comparison. `faults`: probabilities and seed of link faults.
+/// The procedure against the firmware built for `board` under QEMU
+/// (`-icount shift=0,sleep=on`: SysTick counts instructions while the firmware works, at
+/// the instructions per tick the firmware calibrated at boot), ended by `QUIT`, then the
+/// same in-process for comparison. `faults`: probabilities and seed of link faults.
 pub fn run_emulated(
+    board: Board,
     faults: Option<(Faults, u64)>,
     options: &RunOptions,
     defmt_log: Option<PathBuf>,
     phantom: &PhantomConfig,
     progress: &mut dyn FnMut(&str),
 ) -> Result<Emulated, CliError> {
-    progress("building the firmware");
-    let elf = emulator::firmware_elf()?;
+    progress(&format!("building the firmware for {board}"));
+    let elf = emulator::firmware_elf_for(board)?;
     let stack_size_bytes = emulator::stack_size_bytes(&elf)?;
-    let mut emu = emulator::Emulator::start(&elf, &emulator_options(defmt_log))?;
+    let mut emu = emulator::Emulator::start(&elf, &board_emulator_options(board, defmt_log))?;
     progress(&format!("emulator up ({})", emu.args().join(" ")));
     let stream = emu.serial().try_clone().map_err(|source| QemuError::Io {
         context: "emulator serial port".into(),
@@ -705,6 +714,7 @@ pub fn run_emulated(
     let mut local = Session::new(InProcess::new());
     let reference = run_with(&mut local, phantom, options.clone(), &mut |_| {})?;
     Ok(Emulated {
+        board,
         budgets: Budgets::new(&report.cost, stack_size_bytes),
         report,
         reference,
@@ -723,6 +733,9 @@ mod tests {
             worst_step_instructions: 138_600,
             worst_receive_instructions: 101_100,
             peak_stack_bytes: peak_stack,
+            serial_overruns: 0,
+            serial_framing_errors: 0,
+            serial_dropped_bytes: 0,
         }
     }
 

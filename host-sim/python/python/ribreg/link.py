@@ -370,6 +370,9 @@ class Cost(Message):
     worst_step_instructions: int  #: Most instructions of one registration step.
     worst_receive_instructions: int  #: Most instructions handling one received frame.
     peak_stack_bytes: int  #: Peak stack use, bytes.
+    serial_overruns: int = 0  #: UART receive overruns (ORE) since boot.
+    serial_framing_errors: int = 0  #: UART framing, noise and parity errors since boot.
+    serial_dropped_bytes: int = 0  #: Bytes received while the RX queue was full.
 
 
 @dataclass
