@@ -71,7 +71,8 @@ fn try_next(
 
 /// Sends `msg` until the firmware answers, then lets the duplicate answers drain: bytes
 /// that arrive before the firmware has enabled its UART are dropped (QEMU's STM32 USART
-/// model, like the real part, discards them), which a host meets only at start-up.
+/// model, like the real part, discards them), which a host meets only at start-up. A
+/// frame cut that way is NACKed as corrupt: that answer is not the one wanted.
 fn first_reply(
     serial: &mut TcpStream,
     rx: &mut wire::Receiver,
@@ -80,9 +81,17 @@ fn first_reply(
     let deadline = Instant::now() + Duration::from_secs(20);
     while Instant::now() < deadline {
         send(serial, 0, msg);
-        if let Some(reply) = try_next(serial, rx, Duration::from_millis(500)) {
-            while try_next(serial, rx, Duration::from_millis(500)).is_some() {}
-            return reply;
+        while let Some(reply) = try_next(serial, rx, Duration::from_millis(500)) {
+            if !matches!(
+                reply,
+                FromController::Nack {
+                    code: NackCode::Corrupt,
+                    ..
+                }
+            ) {
+                while try_next(serial, rx, Duration::from_millis(500)).is_some() {}
+                return reply;
+            }
         }
     }
     panic!("no reply from the firmware within 20 s");
