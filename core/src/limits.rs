@@ -28,19 +28,19 @@ pub const LIVE_SAMPLES: usize = 2048;
 /// Pose window of the controller: 128 poses = 1.28 s at 100 Hz, enough for a lag of up
 /// to 0.5 s plus 0.7 s of frame latency. 128 × 40 B = 5 KiB.
 pub const TRACK_CAPACITY: usize = 128;
-/// A mid-sized voxel capacity (benchmarks, size report): 2048 × 24 B (code 8 + sum 12 +
-/// count 4) = 48 KiB. A whole-chest phantom sweep needs 5,500–7,900 voxels of 2 mm, so
-/// this cloud coarsens once, to 4 mm (about 2,000 voxels). The controller holds fewer,
-/// [`CONTROLLER_VOXELS`] (RAM budget; README).
-pub const VOXEL_CAPACITY: usize = 2048;
+/// A mid-sized voxel capacity (benchmarks, size report): 4096 × 12 B (code 4, count 2,
+/// mean 3 × 2; `acquisition::compound`) = 48 KiB. A whole-chest phantom sweep needs
+/// 5,500–7,900 voxels of 2 mm, so this cloud coarsens once, to 4 mm (about 2,000
+/// voxels). The controller holds fewer, [`CONTROLLER_VOXELS`] (RAM budget; README).
+pub const VOXEL_CAPACITY: usize = 4096;
 /// Points of placed frames that may wait for the voxel cloud: two full frame messages
 /// (2 × [`MAX_FRAME_PIXELS`] = 192 points × 12 B ≈ 2.3 KiB).
 pub const PENDING_POINTS: usize = 2 * MAX_FRAME_PIXELS;
-/// Voxel capacity of the controller's compounding cloud: 1536 × 24 B = 36 KiB, so that
-/// the registration's stack (about 47 KiB at its deepest, from the firmware's frame sizes)
-/// fits beside the controller in 128 KiB of RAM. A whole-chest sweep fits it at 6 mm
-/// voxels (`controller::CONTROLLER_VOXEL_MM` coarsened once).
-pub const CONTROLLER_VOXELS: usize = 1536;
+/// Voxel capacity of the controller's compounding cloud: 3072 × 12 B = 36 KiB (1536 of
+/// 24 B before the voxels were packed), so that the registration's stack (about 47 KiB
+/// at its deepest, from the firmware's frame sizes) fits beside the controller in
+/// 128 KiB of RAM.
+pub const CONTROLLER_VOXELS: usize = 3072;
 /// Most bone pixels in one frame message (a 384-pixel image annotated every 4th column).
 pub const MAX_FRAME_PIXELS: usize = 96;
 /// Default transform cache capacity (power of two). 128 entries × (4 B key + 48 B
