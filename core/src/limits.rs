@@ -24,7 +24,7 @@ pub const MAX_TREE_NODES: usize = 255;
 /// Longest grid side supported (rows or columns).
 pub const MAX_GRID_SIDE: usize = 64;
 /// Points (at most) checked when finding the live nodes of a map.
-pub const LIVE_SAMPLES: usize = 2048;
+pub const LIVE_SAMPLES: usize = 1024;
 /// Pose window of the controller: 128 poses = 1.28 s at 100 Hz, enough for a lag of up
 /// to 0.5 s plus 0.7 s of frame latency. 128 × 40 B = 5 KiB.
 pub const TRACK_CAPACITY: usize = 128;
@@ -52,7 +52,7 @@ pub const CACHE_CAPACITY: usize = 128;
 /// such entries, 28.5 M with 64 that start over.
 pub const CARRY_CACHE: usize = 64;
 /// At most this many cloud points (an even stride) enter the rib fits.
-pub const FIT_SAMPLES: usize = 16_384;
+pub const FIT_SAMPLES: usize = 1024;
 /// Replies waiting to be sent: a poll emits at most one setpoint or fault and the
 /// results, a received frame one reply; 32 covers a whole result (≤ 32 waypoints).
 pub const OUTBOX: usize = 40;

@@ -72,7 +72,7 @@ impl Frame {
 
 /// At most this many points enter a principal-axes estimate; larger clouds are estimated
 /// from a seeded sample of this size (the axes only steer initialisation and orientation).
-pub const PCA_SAMPLE: usize = 2048;
+pub const PCA_SAMPLE: usize = 1024;
 
 impl Frame {
     /// Principal axes of `points` (all of them if at most [`PCA_SAMPLE`], else a seeded
