@@ -23,7 +23,8 @@ pub const SKELETON_POINTS: usize = 30;
 pub const MAX_TREE_NODES: usize = 255;
 /// Longest grid side supported (rows or columns).
 pub const MAX_GRID_SIDE: usize = 64;
-/// Points (at most) checked when finding the live nodes of a map.
+/// Points (at most) checked when finding the live nodes of a map: each is one scan of the
+/// map, so the SOM-1 dead-unit scan costs at most as much as 1,024 SOM iterations.
 pub const LIVE_SAMPLES: usize = 1024;
 /// Pose window of the controller: 128 poses = 1.28 s at 100 Hz, enough for a lag of up
 /// to 0.5 s plus 0.7 s of frame latency. 128 × 40 B = 5 KiB.
@@ -51,7 +52,10 @@ pub const CACHE_CAPACITY: usize = 128;
 /// cost 76 M instructions with 16 entries that kept nothing new once full, 43 M with 64
 /// such entries, 28.5 M with 64 that start over.
 pub const CARRY_CACHE: usize = 64;
-/// At most this many cloud points (an even stride) enter the rib fits.
+/// At most this many cloud points (an even stride) enter the rib fits: about 100 per
+/// rib side, for a fit of a handful of coefficients; on the controller each costs ~4,000
+/// instructions (soft-float `f64` power sums), so a round's fit stays near 4 M of the
+/// registration's 150 M (16,384 cost 28.7 M on a 3 mm sweep of 3,016 points).
 pub const FIT_SAMPLES: usize = 1024;
 /// Replies waiting to be sent: a poll emits at most one setpoint or fault and the
 /// results, a received frame one reply; 32 covers a whole result (≤ 32 waypoints).
