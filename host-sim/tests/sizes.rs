@@ -96,6 +96,6 @@ fn sweep_state_fits_64_kib() {
     assert!(size_of::<Compounder<TRACK_CAPACITY, VOXEL_CAPACITY>>() < 64 * 1024);
     let per_voxel = (size_of::<VoxelCloud<2048>>() - size_of::<VoxelCloud<1024>>()) / 1024;
     assert_eq!(per_voxel, 12, "bytes per voxel");
-    assert!(CONTROLLER_VOXELS >= 2 * 1536);
+    const { assert!(CONTROLLER_VOXELS >= 2 * 1536) };
     assert!(size_of::<VoxelCloud<CONTROLLER_VOXELS>>() <= 36 * 1024 + 128);
 }

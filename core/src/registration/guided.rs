@@ -689,7 +689,7 @@ impl TargetSkeleton {
             GuidedStage::Carry(round) => {
                 let map = self.map.as_ref().ok_or(Error::RigidFit)?;
                 let n = self.carried.len().min(template.som1.len());
-                let hits = (budget as usize).saturating_mul(CARRY_HITS_PER_UNIT);
+                let hits = budget.saturating_mul(CARRY_HITS_PER_UNIT);
                 let (mut i, mut done) = (cursor, 0);
                 // Nodes whose transform is cached, or one node whose neighbourhood is
                 // widened or fitted: a call of its own, never after cached ones (their
