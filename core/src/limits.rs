@@ -23,24 +23,25 @@ pub const SKELETON_POINTS: usize = 30;
 pub const MAX_TREE_NODES: usize = 255;
 /// Longest grid side supported (rows or columns).
 pub const MAX_GRID_SIDE: usize = 64;
-/// Points (at most) checked when finding the live nodes of a map.
-pub const LIVE_SAMPLES: usize = 2048;
+/// Points (at most) checked when finding the live nodes of a map: each is one scan of the
+/// map, so the SOM-1 dead-unit scan costs at most as much as 1,024 SOM iterations.
+pub const LIVE_SAMPLES: usize = 1024;
 /// Pose window of the controller: 128 poses = 1.28 s at 100 Hz, enough for a lag of up
 /// to 0.5 s plus 0.7 s of frame latency. 128 × 40 B = 5 KiB.
 pub const TRACK_CAPACITY: usize = 128;
-/// A mid-sized voxel capacity (benchmarks, size report): 2048 × 24 B (code 8 + sum 12 +
-/// count 4) = 48 KiB. A whole-chest phantom sweep needs 5,500–7,900 voxels of 2 mm, so
-/// this cloud coarsens once, to 4 mm (about 2,000 voxels). The controller holds fewer,
-/// [`CONTROLLER_VOXELS`] (RAM budget; README).
-pub const VOXEL_CAPACITY: usize = 2048;
+/// A mid-sized voxel capacity (benchmarks, size report): 4096 × 12 B (code 4, count 2,
+/// mean 3 × 2; `acquisition::compound`) = 48 KiB. A whole-chest phantom sweep needs
+/// 5,500–7,900 voxels of 2 mm, so this cloud coarsens once, to 4 mm (about 2,000
+/// voxels). The controller holds fewer, [`CONTROLLER_VOXELS`] (RAM budget; README).
+pub const VOXEL_CAPACITY: usize = 4096;
 /// Points of placed frames that may wait for the voxel cloud: two full frame messages
 /// (2 × [`MAX_FRAME_PIXELS`] = 192 points × 12 B ≈ 2.3 KiB).
 pub const PENDING_POINTS: usize = 2 * MAX_FRAME_PIXELS;
-/// Voxel capacity of the controller's compounding cloud: 1536 × 24 B = 36 KiB, so that
-/// the registration's stack (about 47 KiB at its deepest, from the firmware's frame sizes)
-/// fits beside the controller in 128 KiB of RAM. A whole-chest sweep fits it at 6 mm
-/// voxels (`controller::CONTROLLER_VOXEL_MM` coarsened once).
-pub const CONTROLLER_VOXELS: usize = 1536;
+/// Voxel capacity of the controller's compounding cloud: 3072 × 12 B = 36 KiB (1536 of
+/// 24 B before the voxels were packed), so that the registration's stack (about 47 KiB
+/// at its deepest, from the firmware's frame sizes) fits beside the controller in
+/// 128 KiB of RAM.
+pub const CONTROLLER_VOXELS: usize = 3072;
 /// Most bone pixels in one frame message (a 384-pixel image annotated every 4th column).
 pub const MAX_FRAME_PIXELS: usize = 96;
 /// Default transform cache capacity (power of two). 128 entries × (4 B key + 48 B
@@ -51,8 +52,11 @@ pub const CACHE_CAPACITY: usize = 128;
 /// cost 76 M instructions with 16 entries that kept nothing new once full, 43 M with 64
 /// such entries, 28.5 M with 64 that start over.
 pub const CARRY_CACHE: usize = 64;
-/// At most this many cloud points (an even stride) enter the rib fits.
-pub const FIT_SAMPLES: usize = 16_384;
+/// At most this many cloud points (an even stride) enter the rib fits: about 100 per
+/// rib side, for a fit of a handful of coefficients; on the controller each costs ~4,000
+/// instructions (soft-float `f64` power sums), so a round's fit stays near 4 M of the
+/// registration's 150 M (16,384 cost 28.7 M on a 3 mm sweep of 3,016 points).
+pub const FIT_SAMPLES: usize = 1024;
 /// Replies waiting to be sent: a poll emits at most one setpoint or fault and the
 /// results, a received frame one reply; 32 covers a whole result (≤ 32 waypoints).
 pub const OUTBOX: usize = 40;

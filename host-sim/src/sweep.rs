@@ -41,9 +41,10 @@ use crate::phantom::{PhantomConfig, PhantomPair, Pose, SubjectGeometry, MESH_EDG
 pub mod plus;
 pub(crate) mod sim;
 
-/// Voxel capacity of host compounding: 8192 × 24 B = 192 KiB, enough for a whole-chest
-/// sweep at 2 mm (the phantom sweeps fill 5,500–7,900 voxels; larger ones coarsen to 4 mm). The controller keeps
-/// [`ribreg_core::limits::VOXEL_CAPACITY`] (2048) and coarsens to 4 mm instead.
+/// Voxel capacity of host compounding: 8192 × 12 B = 96 KiB, enough for a whole-chest
+/// sweep at 2 mm (the phantom sweeps fill 5,500–7,900 voxels; larger ones coarsen to
+/// 4 mm). The controller keeps [`ribreg_core::limits::CONTROLLER_VOXELS`] (3072) and
+/// coarsens to 3 mm instead.
 pub const HOST_VOXEL_CAPACITY: usize = 8192;
 
 /// Columns of `poses.csv`.

@@ -65,18 +65,28 @@ fn working_state_fits_64_kib() {
 
 /// The sweep state the controller keeps while compounding (pose window + voxel cloud);
 /// its finished cloud is the registration's target, so it is live beside the state above.
+/// A voxel takes 12 bytes (code, count, fixed-point mean), so the controller holds twice
+/// the 1,536 voxels of 24 B it held in the same 36 KiB.
 #[test]
 fn sweep_state_fits_64_kib() {
     use ribreg_core::acquisition::compound::{Compounder, VoxelCloud};
     use ribreg_core::acquisition::track::PoseTrack;
+    use ribreg_core::limits::CONTROLLER_VOXELS;
     let rows = [
         (
-            "PoseTrack<128> (1.28 s at 100 Hz)",
+            format!("PoseTrack<{TRACK_CAPACITY}> (1.28 s at 100 Hz)"),
             size_of::<PoseTrack<TRACK_CAPACITY>>(),
         ),
-        ("VoxelCloud<2048>", size_of::<VoxelCloud<VOXEL_CAPACITY>>()),
         (
-            "Compounder<128, 2048> (both + calibration)",
+            format!("VoxelCloud<{VOXEL_CAPACITY}>"),
+            size_of::<VoxelCloud<VOXEL_CAPACITY>>(),
+        ),
+        (
+            format!("VoxelCloud<{CONTROLLER_VOXELS}> (the controller's)"),
+            size_of::<VoxelCloud<CONTROLLER_VOXELS>>(),
+        ),
+        (
+            format!("Compounder<{TRACK_CAPACITY}, {VOXEL_CAPACITY}> (both + calibration)"),
             size_of::<Compounder<TRACK_CAPACITY, VOXEL_CAPACITY>>(),
         ),
     ];
@@ -84,4 +94,8 @@ fn sweep_state_fits_64_kib() {
         println!("{name:50} {bytes:6} B  {:5.1} KiB", bytes as f64 / 1024.0);
     }
     assert!(size_of::<Compounder<TRACK_CAPACITY, VOXEL_CAPACITY>>() < 64 * 1024);
+    let per_voxel = (size_of::<VoxelCloud<2048>>() - size_of::<VoxelCloud<1024>>()) / 1024;
+    assert_eq!(per_voxel, 12, "bytes per voxel");
+    const { assert!(CONTROLLER_VOXELS >= 2 * 1536) };
+    assert!(size_of::<VoxelCloud<CONTROLLER_VOXELS>>() <= 36 * 1024 + 128);
 }

@@ -24,13 +24,13 @@
 //! - [`Rng`]: SplitMix64 and Lemire's multiply-shift `below(n)`, so sample indices agree
 //!   bit for bit;
 //! - principal axes: decreasing variance; axes 2 and 3 point to the positive third moment,
-//!   axis 1 = axis 2 × axis 3; clouds over 2048 points are estimated from a seeded sample;
+//!   axis 1 = axis 2 × axis 3; clouds over 1024 points are estimated from a seeded sample;
 //! - SOM: geometric decay of σ and lr from start to end over `T − 1` steps, BMU ties to
 //!   the first node in row-major order, Gaussian neighbourhood `θ = g(Δr)·g(Δc)` applied
 //!   inside the window `|Δr|, |Δc| ≤ ⌈3σ⌉`, linear initialisation over ±2σ of the first
 //!   two principal axes (columns along axis 1, rows along axis 2), "live" nodes = nodes
-//!   that are the BMU of at least one point (all points up to 2048, or a seeded sample
-//!   of 2048);
+//!   that are the BMU of at least one point (all points up to 1024, or a seeded sample
+//!   of 1024);
 //! - Prim: from node 0; the next node is the cheapest, ties to the lowest index; a node's
 //!   parent is the first tree node (in insertion order) reaching the minimum distance;
 //! - hull: gift wrapping from the lowest (then leftmost) point, counter-clockwise, points
@@ -286,8 +286,8 @@ pub fn sorted_eigen3(c: [[f64; 3]; 3]) -> ([f64; 3], [P3; 3]) {
 // Principal axes
 // ---------------------------------------------------------------------------------------
 
-/// Clouds above this size are sampled for principal axes (the core's documented 2048).
-pub const PCA_SAMPLE: usize = 2048;
+/// Clouds above this size are sampled for principal axes (the core's documented 1024).
+pub const PCA_SAMPLE: usize = 1024;
 
 /// Principal frame: centroid, unit axes (decreasing spread, right-handed) and the
 /// standard deviation along each.
@@ -418,7 +418,7 @@ pub const SOM2: SomParams = SomParams {
 };
 
 /// Points checked (at most) when finding live nodes.
-pub const LIVE_SAMPLES: usize = 2048;
+pub const LIVE_SAMPLES: usize = 1024;
 
 /// A map of `rows × cols` nodes, row-major.
 #[derive(Clone, Debug, PartialEq)]

@@ -239,7 +239,7 @@ fn collinear_points() {
 /// never `Ok`.
 #[test]
 fn only_three_ribs() {
-    for (rib, side_tpl, side_tgt) in [(5u8, 0u8, 1u8), (2, 0, 0), (3, 0, 1)] {
+    for (rib, side_tpl) in [(5u8, 0u8), (2, 0), (3, 1)] {
         let (c, labels) = cage_without_rib(0.0, rib);
         assert_eq!(
             build(&c).err(),
@@ -271,15 +271,20 @@ fn only_three_ribs() {
             }),
             "rib {rib} dropped, labelled template, guided model"
         );
-        assert_eq!(
-            target(&c),
-            Err(Error::Endpoints {
-                cloud: Cloud::Target,
-                side: side_tgt,
-                found: 3,
-                expected: 4
-            }),
-            "rib {rib} dropped, target"
+        // Which side of the target's principal frame comes first is arbitrary (a sign of
+        // its sampled axes), so only the count is asserted.
+        assert!(
+            matches!(
+                target(&c),
+                Err(Error::Endpoints {
+                    cloud: Cloud::Target,
+                    found: 3,
+                    expected: 4,
+                    ..
+                })
+            ),
+            "rib {rib} dropped, target: {:?}",
+            target(&c)
         );
     }
 }

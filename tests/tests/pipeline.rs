@@ -285,3 +285,45 @@ fn incremental_registration_equals_register() {
         assert!(r.step(&template, &us, &cfg, 7).unwrap(), "done stays done");
     }
 }
+
+/// The controller's registration checks the target in chunks (one call cannot check a
+/// whole cloud): a bad point past the first chunk is refused with its index in the whole
+/// cloud, before any SOM work, and the registration stays failed.
+#[test]
+fn incremental_registration_checks_every_point() {
+    use ribreg_core::error::{Cloud, Error};
+    use ribreg_core::registration::pipeline::{Registering, CHECK_POINTS_PER_UNIT};
+    let cfg = Config::improved();
+    let labels = cage_labels(0.0);
+    let template = Template::build(&cage(0.0), Some(&labels[..]), &cfg).unwrap();
+    let mut us = target();
+    let index = us.len() - 1;
+    assert!(
+        index > 3 * CHECK_POINTS_PER_UNIT,
+        "the bad point is past several chunks"
+    );
+    us[index].x = f32::NAN;
+    let mut r = Registering::start(&us, &cfg).unwrap();
+    let mut calls = 0;
+    let err = loop {
+        calls += 1;
+        match r.step(&template, &us, &cfg, 1) {
+            Ok(false) => assert_eq!(r.stage(), "check"),
+            Ok(true) => panic!("a NaN target registered"),
+            Err(e) => break e,
+        }
+    };
+    assert_eq!(
+        err,
+        Error::NonFinite {
+            cloud: Cloud::Target,
+            index: index as u32
+        }
+    );
+    assert_eq!(calls, index / CHECK_POINTS_PER_UNIT + 1);
+    assert_eq!(r.stage(), "failed");
+    assert!(
+        r.step(&template, &us, &cfg, 1).is_err(),
+        "failed stays failed"
+    );
+}

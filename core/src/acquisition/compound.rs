@@ -6,13 +6,30 @@
 //! [`VoxelCloud`]: a fixed-capacity voxel grid that keeps one centroid per occupied voxel.
 //!
 //! # The voxel cloud
-//! Voxels are kept sorted by their Morton (Z-order) code, so a lookup is a binary search
-//! and the cloud needs no hash table. When a point needs a new voxel and the cloud is
-//! full, the grid is coarsened in place: the voxel edge doubles, which shifts every Morton
-//! code right by three bits (keeping the order) and merges the voxels that now share a
-//! code, exactly (sums are re-based on the parent voxel's corner). Coarsening stops at
+//! A voxel takes 12 bytes (the size of the centroid it becomes, in place): a `u32`
+//! Morton (Z-order) code, a `u16` point count and the running mean as a `u16` per axis,
+//! an offset from the voxel's lowest corner in 1/65536 of its edge. Voxels are kept
+//! sorted by code, so a lookup is a binary search and the cloud needs no hash table.
+//!
+//! The code interleaves 10 bits per axis: voxels are indexed in a window of 1024 finest
+//! voxels per axis whose origin the first point fixes (a multiple of 2^[`MAX_COARSENINGS`]
+//! finest voxels, 512 or a little less below it), so every point within 504 finest voxels
+//! of the first on every axis (±1 m at 2 mm) is inside; a point outside is refused and
+//! counted ([`VoxelStats::refused_outside`]).
+//!
+//! When a point needs a new voxel and the cloud is full, the grid is coarsened in place:
+//! the voxel edge doubles, which shifts every Morton code right by three bits (keeping
+//! the order, since the origin is a multiple of the coarsest edge) and merges the voxels
+//! that now share a code, means weighted by count. Coarsening stops at
 //! [`VoxelCloud::max_voxel_mm`]; past it a point needing a new voxel is refused and
 //! counted. Nothing is dropped without a counter: see [`VoxelStats`].
+//!
+//! Accuracy contract (tested against an `f64` mean): a centroid is within 2⁻¹⁶ of the
+//! edge per axis of the mean of its points for one point, and the error of the running
+//! mean grows by at most half a 1/65536 unit per point merged: for n points at most
+//! (n + 1) / 2 units, 0.02 mm for 1,000 points in a 3 mm voxel (the points' own spread is
+//! millimetres). A coarsening adds a quarter unit per voxel and a weighted merge half a
+//! unit.
 
 use crate::acquisition::probe::Calibration;
 use crate::acquisition::track::{PoseTrack, TrackedPose};
@@ -21,14 +38,21 @@ use crate::limits::PENDING_POINTS;
 use crate::math::geom::Rigid;
 use crate::Vec3;
 
-/// Bits of each axis index in a Morton code: 3 × 21 = 63 bits.
-const AXIS_BITS: u32 = 21;
-/// Offset making axis indices non-negative: the grid spans ±2²⁰ finest voxels.
-const AXIS_OFFSET: i64 = 1 << (AXIS_BITS - 1);
-/// Smallest finest-voxel edge, mm: 2²⁰ × 0.1 mm ≈ 105 m covers every coordinate within
-/// [`crate::limits::MAX_COORD_MM`].
+/// Bits of each axis index in a voxel's Morton code: 3 × 10 = 30 of its `u32`.
+const AXIS_BITS: u32 = 10;
+/// Voxels along each axis of the grid window at the finest level.
+const AXIS_VOXELS: i64 = 1 << AXIS_BITS;
+/// Most coarsenings a cloud may be configured for: the window's origin is a multiple of
+/// 2^`MAX_COARSENINGS` finest voxels placed at most 512 below the first point, so the
+/// first point lies in the window and every point within 512 − 2⁸ = 256 finest voxels of
+/// it on every axis does too (with [`DEFAULT_MAX_COARSENINGS`], 504).
+pub const MAX_COARSENINGS: u8 = 8;
+/// A voxel's mean is kept as its offset from the voxel's lowest corner in 1/65536 of the
+/// edge (`u16` per axis).
+const MEAN_SCALE: f64 = 65_536.0;
+/// Smallest finest-voxel edge, mm.
 pub const MIN_VOXEL_MM: f32 = 0.1;
-/// Coarsenings allowed by default: the voxel edge may grow 8× (e.g. 1.5 → 12 mm).
+/// Coarsenings allowed by default: the voxel edge may grow 8× (e.g. 2 → 16 mm).
 pub const DEFAULT_MAX_COARSENINGS: u8 = 3;
 /// [`VoxelCloud::work`] of one inserted point besides the voxels it shifts: its `f64`
 /// voxel arithmetic and binary search cost about 2,500 instructions on the Cortex-M4F.
@@ -47,21 +71,48 @@ pub struct VoxelStats {
     pub merged: u32,
     /// Points refused because the cloud was full at its coarsest voxel size.
     pub refused_full: u32,
+    /// Points refused because they lie outside the grid window (module docs: at least
+    /// 504 finest voxels from the first point on some axis).
+    pub refused_outside: u32,
     /// Times the grid was coarsened.
     pub coarsenings: u8,
+}
+
+/// One voxel in 12 bytes, as three words (the size of the [`Vec3`] centroid it becomes,
+/// in place, at [`VoxelCloud::finish`]): the Morton code of its window indices at the
+/// current level; the point count (`u16`, saturating) and the mean's x; the mean's y and
+/// z. Mean components are offsets from the voxel's lowest corner in 1/65536 of its edge.
+type Slot = [u32; 3];
+
+// A voxel becomes its centroid in place.
+const _: () = assert!(core::mem::size_of::<Slot>() == core::mem::size_of::<Vec3>());
+
+fn slot(code: u32, count: u16, mean: [u16; 3]) -> Slot {
+    [
+        code,
+        u32::from(count) | (u32::from(mean[0]) << 16),
+        u32::from(mean[1]) | (u32::from(mean[2]) << 16),
+    ]
+}
+
+fn count_of(s: &Slot) -> u16 {
+    s[1] as u16
+}
+
+fn mean_of(s: &Slot) -> [u16; 3] {
+    [(s[1] >> 16) as u16, s[2] as u16, (s[2] >> 16) as u16]
 }
 
 /// A fixed-capacity voxel-grid down-sampling of a point stream (module docs).
 #[derive(Clone)]
 pub struct VoxelCloud<const CAP: usize> {
-    /// Morton codes at the current level, ascending.
-    codes: [u64; CAP],
-    /// Per voxel: sum of the points' offsets from the voxel's lowest corner, mm; after
-    /// [`VoxelCloud::finish`], the centroid.
-    sums: [Vec3; CAP],
-    counts: [u32; CAP],
+    /// Voxels by Morton code, ascending; after [`VoxelCloud::finish`], the centroids.
+    slots: [Slot; CAP],
     len: usize,
     finest_mm: f32,
+    /// The window's lowest corner, finest-level indices (a multiple of
+    /// 2^`max_level` on every axis); set by the first accepted point.
+    origin: Option<[i64; 3]>,
     level: u8,
     max_level: u8,
     finished: bool,
@@ -75,7 +126,7 @@ pub struct VoxelCloud<const CAP: usize> {
 
 impl<const CAP: usize> VoxelCloud<CAP> {
     /// An empty cloud with finest voxel edge `voxel_mm` (at least [`MIN_VOXEL_MM`]) that
-    /// may coarsen `max_coarsenings` times.
+    /// may coarsen `max_coarsenings` times (at most [`MAX_COARSENINGS`]).
     pub fn new(voxel_mm: f32, max_coarsenings: u8) -> Result<Self> {
         let mut cloud = Self::empty();
         cloud.reset(voxel_mm, max_coarsenings)?;
@@ -86,11 +137,10 @@ impl<const CAP: usize> VoxelCloud<CAP> {
     /// `static` on the controller: no stack copy of its arrays).
     pub const fn empty() -> Self {
         VoxelCloud {
-            codes: [0; CAP],
-            sums: [Vec3::new(0.0, 0.0, 0.0); CAP],
-            counts: [0; CAP],
+            slots: [[0; 3]; CAP],
             len: 0,
             finest_mm: 1.0,
+            origin: None,
             level: 0,
             max_level: 0,
             finished: false,
@@ -100,6 +150,7 @@ impl<const CAP: usize> VoxelCloud<CAP> {
                 accepted: 0,
                 merged: 0,
                 refused_full: 0,
+                refused_outside: 0,
                 coarsenings: 0,
             },
         }
@@ -111,13 +162,14 @@ impl<const CAP: usize> VoxelCloud<CAP> {
         if !(MIN_VOXEL_MM..=1000.0).contains(&voxel_mm) {
             return Err(Error::Config("voxel size must be between 0.1 and 1000 mm"));
         }
-        if CAP == 0 || max_coarsenings > 16 {
+        if CAP == 0 || max_coarsenings > MAX_COARSENINGS {
             return Err(Error::Config(
-                "voxel cloud needs a capacity and at most 16 coarsenings",
+                "voxel cloud needs a capacity and at most 8 coarsenings",
             ));
         }
         self.len = 0;
         self.finest_mm = voxel_mm;
+        self.origin = None;
         self.level = 0;
         self.max_level = max_coarsenings;
         self.finished = false;
@@ -144,8 +196,8 @@ impl<const CAP: usize> VoxelCloud<CAP> {
     /// Work done by [`VoxelCloud::insert`] so far, a cost proxy for callers that bound
     /// their work per call: [`INSERT_WORK`] per point (its `f64` voxel arithmetic and
     /// search), plus one per voxel shifted to make room for a new one, plus two per voxel
-    /// passed over by a coarsening. One unit is about 20 instructions on the
-    /// Cortex-M4F (a 24-byte voxel moved).
+    /// passed over by a coarsening. One unit is at most about 20 instructions on the
+    /// Cortex-M4F.
     pub fn work(&self) -> u64 {
         self.work
     }
@@ -156,7 +208,8 @@ impl<const CAP: usize> VoxelCloud<CAP> {
     }
 
     /// Adds a point. `Ok(true)` if kept, `Ok(false)` if refused because the cloud is full
-    /// at its coarsest level (counted in [`VoxelStats::refused_full`]). A point that is not
+    /// at its coarsest level or the point is outside the grid window (counted in
+    /// [`VoxelStats::refused_full`], [`VoxelStats::refused_outside`]). A point that is not
     /// finite or beyond [`crate::limits::MAX_COORD_MM`] is [`Error::NonFinite`] /
     /// [`Error::OutOfRange`] (cloud `Target`), and after [`VoxelCloud::finish`] every
     /// insert is [`Error::Config`]; the cloud is unchanged then.
@@ -176,28 +229,47 @@ impl<const CAP: usize> VoxelCloud<CAP> {
                 index: self.stats.accepted,
             });
         }
-        // Finest-level indices, offset to be non-negative (< 2^21 by MIN_VOXEL_MM).
-        let k0 =
-            p.map(|v| libm::floor(f64::from(v) / f64::from(self.finest_mm)) as i64 + AXIS_OFFSET);
-        let finest = morton([k0.x as u64, k0.y as u64, k0.z as u64]);
         self.work = self.work.wrapping_add(INSERT_WORK);
+        // Finest-level indices (|p| <= 1e5 mm and the edge >= 0.1 mm: within ±2^20).
+        let finest = f64::from(self.finest_mm);
+        let a = p.map(|v| libm::floor(f64::from(v) / finest) as i64);
+        let origin = *self.origin.get_or_insert_with(|| {
+            let block = 1i64 << self.max_level;
+            [a.x, a.y, a.z].map(|k| (k - AXIS_VOXELS / 2).div_euclid(block) * block)
+        });
+        let r = [a.x - origin[0], a.y - origin[1], a.z - origin[2]];
         loop {
-            let code = finest >> (3 * u32::from(self.level));
-            let offset = (p.cast::<f64>() - self.corner(code)).cast::<f32>();
-            match self.codes[..self.len].binary_search(&code) {
+            let level = u32::from(self.level);
+            if r.iter().any(|&k| k < 0 || k >= AXIS_VOXELS << level) {
+                self.stats.refused_outside = self.stats.refused_outside.saturating_add(1);
+                return Ok(false);
+            }
+            let k = r.map(|k| (k >> level) as u32);
+            let code = morton(k);
+            let edge = finest * f64::from(1u32 << level);
+            let corner = |i: usize| (((k[i] as i64) << level) + origin[i]) as f64 * finest;
+            let q: [u16; 3] = core::array::from_fn(|i| {
+                let frac = (f64::from(p[i]) - corner(i)) / edge;
+                libm::floor(frac * MEAN_SCALE).clamp(0.0, MEAN_SCALE - 1.0) as u16
+            });
+            match self.slots[..self.len].binary_search_by_key(&code, |s| s[0]) {
                 Ok(i) => {
-                    self.sums[i] += offset;
-                    self.counts[i] = self.counts[i].saturating_add(1);
+                    let s = &mut self.slots[i];
+                    let n = count_of(s).saturating_add(1);
+                    let m = mean_of(s);
+                    // The running mean in f32 (exact for these integers; the error of
+                    // one update is below half a unit of the 1/65536 scale).
+                    let mean = core::array::from_fn(|a| {
+                        let (m, q) = (f32::from(m[a]), f32::from(q[a]));
+                        libm::roundf(m + (q - m) / f32::from(n)).clamp(0.0, 65_535.0) as u16
+                    });
+                    *s = slot(code, n, mean);
                     self.stats.merged = self.stats.merged.saturating_add(1);
                 }
                 Err(i) if self.len < CAP => {
                     self.work = self.work.wrapping_add((self.len - i) as u64);
-                    self.codes.copy_within(i..self.len, i + 1);
-                    self.sums.copy_within(i..self.len, i + 1);
-                    self.counts.copy_within(i..self.len, i + 1);
-                    self.codes[i] = code;
-                    self.sums[i] = offset;
-                    self.counts[i] = 1;
+                    self.slots.copy_within(i..self.len, i + 1);
+                    self.slots[i] = slot(code, 1, q);
                     self.len += 1;
                 }
                 Err(_) if self.level < self.max_level => {
@@ -214,49 +286,37 @@ impl<const CAP: usize> VoxelCloud<CAP> {
         }
     }
 
-    /// Lowest corner of voxel `code` at the current level, mm (f64: the grid origin is
-    /// ±2²⁰ voxels away).
-    fn corner(&self, code: u64) -> nalgebra::Vector3<f64> {
-        let k = demorton(code);
-        let edge = f64::from(self.finest_mm) * f64::from(1u32 << self.level);
-        let origin = -(AXIS_OFFSET as f64) * f64::from(self.finest_mm);
-        nalgebra::Vector3::new(k[0] as f64, k[1] as f64, k[2] as f64) * edge
-            + nalgebra::Vector3::repeat(origin)
-    }
-
-    /// Doubles the voxel edge and merges voxels that now share a code.
+    /// Doubles the voxel edge and merges voxels that now share a code. A child's mean
+    /// becomes its parent's by halving after adding a half edge on each axis where the
+    /// child is the upper one; merged means are weighted by count (in `f32`: the
+    /// Cortex-M4F's single-precision unit, no 64-bit division).
     fn coarsen(&mut self) {
-        let child_edge = self.voxel_mm();
         self.work = self.work.wrapping_add(2 * self.len as u64);
         self.level += 1;
         self.stats.coarsenings = self.stats.coarsenings.saturating_add(1);
-        // The three low bits of a code say in which half of its parent the child lies,
-        // per axis: the child's corner is that far from the parent's.
-        let shifts: [Vec3; 8] = core::array::from_fn(|bits| {
-            Vec3::new(
-                (bits & 1) as f32,
-                ((bits >> 1) & 1) as f32,
-                ((bits >> 2) & 1) as f32,
-            ) * child_edge
-        });
         let len = self.len.min(CAP);
-        let (codes, sums, counts) = (
-            &mut self.codes[..len],
-            &mut self.sums[..len],
-            &mut self.counts[..len],
-        );
+        let slots = &mut self.slots[..len];
         // Merged voxels, the last one at `w - 1` (w <= r: the write never passes the read).
         let mut w = 0usize;
         for r in 0..len {
-            let code = codes[r] >> 3;
-            let sum = sums[r] + shifts[(codes[r] & 7) as usize] * counts[r] as f32;
-            if w > 0 && codes[w - 1] == code {
-                sums[w - 1] += sum;
-                counts[w - 1] = counts[w - 1].saturating_add(counts[r]);
+            let s = slots[r];
+            let code = s[0] >> 3;
+            let n = count_of(&s);
+            let m = mean_of(&s);
+            let mean: [u16; 3] = core::array::from_fn(|a| {
+                let upper = (s[0] >> a) & 1;
+                ((u32::from(m[a]) + (upper << 16)) >> 1) as u16
+            });
+            if w > 0 && slots[w - 1][0] == code {
+                let (n0, m0) = (count_of(&slots[w - 1]), mean_of(&slots[w - 1]));
+                let (f0, f1) = (f32::from(n0), f32::from(n));
+                let merged = core::array::from_fn(|a| {
+                    let v = (f32::from(m0[a]) * f0 + f32::from(mean[a]) * f1) / (f0 + f1);
+                    libm::roundf(v).clamp(0.0, 65_535.0) as u16
+                });
+                slots[w - 1] = slot(code, n0.saturating_add(n), merged);
             } else {
-                codes[w] = code;
-                sums[w] = sum;
-                counts[w] = counts[r];
+                slots[w] = slot(code, n, mean);
                 w += 1;
             }
         }
@@ -268,7 +328,7 @@ impl<const CAP: usize> VoxelCloud<CAP> {
     /// slice.
     pub fn finish(&mut self) -> &[Vec3] {
         while !self.finish_some(usize::MAX) {}
-        &self.sums[..self.len]
+        bytemuck::cast_slice(&self.slots[..self.len])
     }
 
     /// [`VoxelCloud::finish`] in bounded steps: turns at most `budget` more voxels into
@@ -278,43 +338,50 @@ impl<const CAP: usize> VoxelCloud<CAP> {
     pub fn finish_some(&mut self, budget: usize) -> bool {
         self.finished = true;
         let end = self.converted.saturating_add(budget).min(self.len);
+        let origin = self.origin.unwrap_or([0; 3]);
+        let level = u32::from(self.level);
+        let finest = f64::from(self.finest_mm);
+        let edge = finest * f64::from(1u32 << level);
         for i in self.converted..end {
-            let c = self.corner(self.codes[i]);
-            let mean = self.sums[i].cast::<f64>() / f64::from(self.counts[i].max(1));
-            self.sums[i] = (c + mean).cast::<f32>();
+            let s = self.slots[i];
+            let k = demorton(s[0]);
+            let m = mean_of(&s);
+            let c: [f32; 3] = core::array::from_fn(|a| {
+                let corner = (((k[a] as i64) << level) + origin[a]) as f64 * finest;
+                (corner + (f64::from(m[a]) + 0.5) / MEAN_SCALE * edge) as f32
+            });
+            self.slots[i] = bytemuck::cast(Vec3::from(c));
         }
         self.converted = end;
         end >= self.len
     }
 }
 
-/// Interleaves the low 21 bits of x, y, z: bit `i` of x → bit `3i`, y → `3i + 1`,
+/// Interleaves the low 10 bits of x, y, z: bit `i` of x → bit `3i`, y → `3i + 1`,
 /// z → `3i + 2`.
-fn morton(k: [u64; 3]) -> u64 {
+fn morton(k: [u32; 3]) -> u32 {
     spread(k[0]) | (spread(k[1]) << 1) | (spread(k[2]) << 2)
 }
 
 /// Inverse of [`morton`].
-fn demorton(code: u64) -> [u64; 3] {
+fn demorton(code: u32) -> [u32; 3] {
     [compact(code), compact(code >> 1), compact(code >> 2)]
 }
 
-fn spread(v: u64) -> u64 {
-    let mut x = v & 0x1f_ffff;
-    x = (x | (x << 32)) & 0x001f_0000_0000_ffff;
-    x = (x | (x << 16)) & 0x001f_0000_ff00_00ff;
-    x = (x | (x << 8)) & 0x100f_00f0_0f00_f00f;
-    x = (x | (x << 4)) & 0x10c3_0c30_c30c_30c3;
-    (x | (x << 2)) & 0x1249_2492_4924_9249
+fn spread(v: u32) -> u32 {
+    let mut x = v & 0x3ff;
+    x = (x | (x << 16)) & 0x0300_00ff;
+    x = (x | (x << 8)) & 0x0300_f00f;
+    x = (x | (x << 4)) & 0x030c_30c3;
+    (x | (x << 2)) & 0x0924_9249
 }
 
-fn compact(v: u64) -> u64 {
-    let mut x = v & 0x1249_2492_4924_9249;
-    x = (x | (x >> 2)) & 0x10c3_0c30_c30c_30c3;
-    x = (x | (x >> 4)) & 0x100f_00f0_0f00_f00f;
-    x = (x | (x >> 8)) & 0x001f_0000_ff00_00ff;
-    x = (x | (x >> 16)) & 0x001f_0000_0000_ffff;
-    (x | (x >> 32)) & 0x1f_ffff
+fn compact(v: u32) -> u32 {
+    let mut x = v & 0x0924_9249;
+    x = (x | (x >> 2)) & 0x030c_30c3;
+    x = (x | (x >> 4)) & 0x0300_f00f;
+    x = (x | (x >> 8)) & 0x0300_00ff;
+    (x | (x >> 16)) & 0x3ff
 }
 
 /// Frames placed and refused by a [`Compounder`].
@@ -554,17 +621,71 @@ mod tests {
 
     #[test]
     fn morton_round_trip() {
-        for k in [
-            [0, 0, 0],
-            [1, 2, 3],
-            [0x1f_ffff, 0, 0x15_5555],
-            [12345, 999_999, 2_000_000],
-        ] {
+        for k in [[0, 0, 0], [1, 2, 3], [0x3ff, 0, 0x155], [123, 999, 1023]] {
             assert_eq!(demorton(morton(k)), k);
         }
+        assert_eq!(morton([0x3ff; 3]), (1 << 30) - 1);
         // Halving every index is a 3-bit shift.
-        let k = [1234u64, 777, 99];
-        assert_eq!(morton(k) >> 3, morton([617, 388, 49]));
+        let k = [1000u32, 777, 99];
+        assert_eq!(morton(k) >> 3, morton([500, 388, 49]));
+    }
+
+    /// The accuracy contract (module docs) against an `f64` reference: every centroid
+    /// within (n + 1) / 2 of the 1/65536 units of its voxel's edge per axis of the mean of
+    /// its n points, through coarsenings; the voxels are the ones the final edge gives.
+    #[test]
+    fn centroids_match_an_f64_mean() {
+        check_against_f64::<4096>(1, 200, 0);
+        check_against_f64::<256>(2, 5_000, 3);
+        check_against_f64::<64>(3, 20_000, 3);
+    }
+
+    fn check_against_f64<const N: usize>(seed: u64, n_points: usize, coarsenings: u8) {
+        use std::collections::BTreeMap;
+        let mut rng = crate::math::rng::Rng::new(seed);
+        let pts: std::vec::Vec<Vec3> = (0..n_points)
+            .map(|_| {
+                Vec3::new(
+                    rng.next_f32() * 80.0 - 1234.5,
+                    rng.next_f32() * 40.0 + 300.0,
+                    rng.next_f32() * 10.0 - 0.3,
+                )
+            })
+            .collect();
+        let mut c = VoxelCloud::<N>::new(1.5, 6).unwrap();
+        for p in &pts {
+            assert_eq!(c.insert(p), Ok(true));
+        }
+        assert_eq!(c.stats.coarsenings, coarsenings);
+        let edge = f64::from(c.voxel_mm());
+        let key = |p: &Vec3| p.map(|v| libm::floor(f64::from(v) / edge) as i64);
+        let mut reference: BTreeMap<[i64; 3], (f64, [f64; 3])> = BTreeMap::new();
+        for p in &pts {
+            let k = key(p);
+            let e = reference.entry([k.x, k.y, k.z]).or_default();
+            e.0 += 1.0;
+            for a in 0..3 {
+                e.1[a] += f64::from(p[a]);
+            }
+        }
+        let centroids = c.finish();
+        assert_eq!(centroids.len(), reference.len());
+        let mut worst = 0.0f64;
+        for q in centroids {
+            let k = key(q);
+            let (n, sum) = reference[&[k.x, k.y, k.z]];
+            for a in 0..3 {
+                let err = (f64::from(q[a]) - sum[a] / n).abs();
+                // Plus the f32 rounding of a coordinate near 1,234 mm.
+                let bound = (n + 1.0) / 2.0 / MEAN_SCALE * edge + 1e-4;
+                assert!(err <= bound, "{err} > {bound} (n = {n}, edge {edge} mm)");
+                worst = worst.max(err);
+            }
+        }
+        std::eprintln!(
+            "{n_points} points, {} voxels of {edge} mm: worst {worst:.2e} mm",
+            centroids.len()
+        );
     }
 
     #[test]
@@ -583,13 +704,13 @@ mod tests {
         let pts = c.finish();
         assert!(pts
             .iter()
-            .any(|p| (p - Vec3::new(1.0, 0.6, 0.3)).norm() < 1e-5));
+            .any(|p| (p - Vec3::new(1.0, 0.6, 0.3)).norm() < 1e-4));
         assert!(pts
             .iter()
-            .any(|p| (p - Vec3::new(-0.5, 0.0, 0.0)).norm() < 1e-5));
+            .any(|p| (p - Vec3::new(-0.5, 0.0, 0.0)).norm() < 1e-4));
         assert!(pts
             .iter()
-            .any(|p| (p - Vec3::new(10.1, -3.9, 5.0)).norm() < 1e-5));
+            .any(|p| (p - Vec3::new(10.1, -3.9, 5.0)).norm() < 1e-4));
         assert!(matches!(c.insert(&Vec3::zeros()), Err(Error::Config(_))));
     }
 
@@ -616,10 +737,17 @@ mod tests {
         for p in &pts {
             assert_eq!(direct.insert(p), Ok(true));
         }
-        let (a, b) = (small.finish(), direct.finish());
+        // The windows' origins differ (multiples of 16 and of 1 voxel), so the Morton
+        // orders do too: compare in one order. Means agree within the contract.
+        let sorted = |c: &mut VoxelCloud<64>| {
+            let mut v = c.finish().to_vec();
+            v.sort_by(|p, q| p.as_slice().partial_cmp(q.as_slice()).unwrap());
+            v
+        };
+        let (a, b) = (sorted(&mut small), sorted(&mut direct));
         assert_eq!(a.len(), b.len());
-        for (p, q) in a.iter().zip(b) {
-            assert!((p - q).norm() < 1e-3, "{p} vs {q}");
+        for (p, q) in a.iter().zip(&b) {
+            assert!((p - q).norm() < 0.05, "{p} vs {q}");
         }
         // At its coarsest level a full cloud refuses and counts.
         let mut tiny = VoxelCloud::<4>::new(1.0, 0).unwrap();

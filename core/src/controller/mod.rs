@@ -76,8 +76,11 @@ use crate::wire::{
 use crate::Vec3;
 use nalgebra::Matrix3;
 
-/// Finest voxel edge the robot PC configures for the controller, mm.
-pub const CONTROLLER_VOXEL_MM: f32 = 3.0;
+/// Finest voxel edge the robot PC configures for the controller, mm: the finest at which
+/// a whole-chest sweep fits the controller's [`crate::limits::CONTROLLER_VOXELS`] without
+/// coarsening (`ribreg hil --in-process --seed 0..9` fill 1,914–2,777 voxels at 3.5 mm;
+/// at 3 mm six of the ten overflow, and one coarsening doubles the edge to 6 mm).
+pub const CONTROLLER_VOXEL_MM: f32 = 3.5;
 
 /// Units of work per registration step ([`Registering::step`]'s budget: SOM iterations,
 /// node-set scans or rigid fits). One iteration of SOM 1 costs about 8,000 instructions
@@ -85,8 +88,8 @@ pub const CONTROLLER_VOXEL_MM: f32 = 3.0;
 /// a step near 0.1 M instructions (README, "Controller and firmware").
 pub const SOM_ITERATIONS_PER_POLL: u32 = 8;
 /// Voxels turned into centroids per [`Controller::poll`] before the registration starts:
-/// ~1,800 instructions each on the emulated Cortex-M4F (865 voxels: 14 calls of 64,
-/// 1.79 M in all, the worst 125 k; the registration's set-up is a call of its own).
+/// ~1,800 instructions each on the emulated Cortex-M4F (2,255 voxels: 37 calls of 64,
+/// 4.07 M in all, the worst 116 k; the registration's set-up is a call of its own).
 pub const VOXELS_FINISHED_PER_POLL: usize = 64;
 /// Work ([`crate::acquisition::compound::VoxelCloud::work`], ~20 instructions a unit) spent per
 /// [`Controller::poll`] moving queued sweep points into the voxel cloud (a frame message

@@ -9,7 +9,12 @@ use nalgebra::{Matrix3, SymmetricEigen};
 /// Checks that every coordinate is finite and within ±[`MAX_COORD_MM`], and that the
 /// point count is in `min..=max`.
 pub fn validate(points: &[Vec3], cloud: Cloud, min: usize, max: usize) -> Result<()> {
-    let n = points.len();
+    validate_count(points.len(), cloud, min, max)?;
+    validate_points(points, cloud, 0)
+}
+
+/// The count half of [`validate`]: `n` in `min..=max`.
+pub fn validate_count(n: usize, cloud: Cloud, min: usize, max: usize) -> Result<()> {
     if n < min {
         return Err(Error::TooFewPoints {
             cloud,
@@ -24,17 +29,23 @@ pub fn validate(points: &[Vec3], cloud: Cloud, min: usize, max: usize) -> Result
             max: sat_u32(max),
         });
     }
+    Ok(())
+}
+
+/// The coordinate half of [`validate`], for a chunk of a cloud that starts at index
+/// `first` (errors name the index in the whole cloud).
+pub fn validate_points(points: &[Vec3], cloud: Cloud, first: usize) -> Result<()> {
     for (i, p) in points.iter().enumerate() {
         if p.iter().any(|c| !c.is_finite()) {
             return Err(Error::NonFinite {
                 cloud,
-                index: sat_u32(i),
+                index: sat_u32(first.saturating_add(i)),
             });
         }
         if p.iter().any(|c| c.abs() > MAX_COORD_MM) {
             return Err(Error::OutOfRange {
                 cloud,
-                index: sat_u32(i),
+                index: sat_u32(first.saturating_add(i)),
             });
         }
     }
@@ -72,7 +83,7 @@ impl Frame {
 
 /// At most this many points enter a principal-axes estimate; larger clouds are estimated
 /// from a seeded sample of this size (the axes only steer initialisation and orientation).
-pub const PCA_SAMPLE: usize = 2048;
+pub const PCA_SAMPLE: usize = 1024;
 
 impl Frame {
     /// Principal axes of `points` (all of them if at most [`PCA_SAMPLE`], else a seeded

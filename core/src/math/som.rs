@@ -156,7 +156,7 @@ impl<const CAP: usize> LiveScan<CAP> {
                 *h = true;
             }
         }
-        // Note: end <= LIVE_SAMPLES = 2048.
+        // Note: end <= LIVE_SAMPLES = 1024.
         self.next = end as u32;
         end >= total
     }

@@ -404,8 +404,9 @@ pub enum GuidedStage {
 /// of work, a unit being about one scan of a node set ([`SOM1_CAPACITY`] distances, about
 /// as much as one SOM iteration): [`QUERIES_PER_UNIT`] nearest-node queries of a k-d tree
 /// ([`crate::math::kdtree`]) with what goes with them, [`SPLITS_PER_UNIT`] points partitioned
-/// while building a tree, [`FIT_POINTS_PER_UNIT`] rib-fit points, one widening of a
-/// carried node's neighbourhood, or one rigid fit; a stage change is a call of its own. The
+/// while building a tree, [`FIT_POINTS_PER_UNIT`] rib-fit points, [`CARRY_HITS_PER_UNIT`]
+/// template nodes carried through a cached transform, one widening of a carried node's
+/// neighbourhood, or one rigid fit; a stage change is a call of its own. The
 /// state lives here (about 13 KiB: the carried nodes, labels, three node trees, the
 /// mapping's transform cache), not on the stack. [`crate::registration::pipeline::register`] runs it to
 /// the end.
@@ -449,6 +450,10 @@ pub const QUERIES_PER_UNIT: usize = 8;
 /// Points partitioned while building a tree per unit of budget (a median selection of `m`
 /// points takes a few `m` comparisons, a scan of `m` nodes takes `m` distances).
 pub const SPLITS_PER_UNIT: usize = 48;
+/// Template nodes carried through a cached transform per unit of budget: finding a
+/// node's neighbourhood sorts the 30 skeleton distances, about a third of a scan (set
+/// from the emulated controller's per-stage instruction counts).
+pub const CARRY_HITS_PER_UNIT: usize = 3;
 /// Cloud points labelled and added to the rib fits per unit of budget (their `f64`
 /// power sums are soft-float on the Cortex-M4F: ~4,000 instructions a point).
 pub const FIT_POINTS_PER_UNIT: usize = 3;
@@ -684,23 +689,37 @@ impl TargetSkeleton {
             GuidedStage::Carry(round) => {
                 let map = self.map.as_ref().ok_or(Error::RigidFit)?;
                 let n = self.carried.len().min(template.som1.len());
+                let hits = budget.saturating_mul(CARRY_HITS_PER_UNIT);
                 let (mut i, mut done) = (cursor, 0);
-                // `queries` nodes found in the cache; a neighbourhood being widened or
-                // fitted ends the call (a fit is a call of its own).
-                while i < n && done < queries {
+                // Nodes whose transform is cached, or one node whose neighbourhood is
+                // widened or fitted: a call of its own, never after cached ones (their
+                // sum went over the controller's per-call budget).
+                while i < n && done < hits {
                     let p = &template.som1[i];
-                    let busy = self.lookup.is_some();
-                    let Some((t, _)) =
-                        map.transform_step(p, &mut self.lookup, &mut self.cache, budget as u32)?
-                    else {
-                        break;
+                    let t = match self.lookup {
+                        None => self.cache.get(map.neighbourhood(p)),
+                        Some(_) => None,
+                    };
+                    let t = match t {
+                        Some((t, _)) => t,
+                        None if done > 0 => break,
+                        None => match map.transform_step(
+                            p,
+                            &mut self.lookup,
+                            &mut self.cache,
+                            budget as u32,
+                        )? {
+                            Some((t, _)) => {
+                                self.carried[i] = t.apply(p);
+                                i += 1;
+                                break;
+                            }
+                            None => break,
+                        },
                     };
                     self.carried[i] = t.apply(p);
                     i += 1;
                     done += 1;
-                    if busy {
-                        break;
-                    }
                 }
                 self.cursor = i as u32;
                 if i >= n {

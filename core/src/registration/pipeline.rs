@@ -4,7 +4,7 @@
 use crate::config::{Config, RibModel};
 use crate::error::{Cloud, Error, Result};
 use crate::limits::{MAX_CLOUD_POINTS, MIN_CLOUD_POINTS};
-use crate::math::geom::{nearest, validate, Frame, Rigid};
+use crate::math::geom::{nearest, validate, validate_count, validate_points, Frame, Rigid};
 use crate::registration::endpoints::{match_endpoints, EndpointMatch};
 use crate::registration::guided::{
     check_coverage, fit_ribs, label_nodes, GuidedStage, NodeLabels, PoseConfidence, TargetSkeleton,
@@ -180,9 +180,14 @@ pub fn register(template: &Template, target: &[Vec3], cfg: &Config) -> Result<Re
         .ok_or(Error::Config("the registration did not finish"))
 }
 
+/// Target points checked (finite, in range) per unit of [`Registering::step`]'s budget:
+/// a point's six comparisons are a few dozen instructions, a SOM iteration's 400
+/// distances some thousands.
+pub const CHECK_POINTS_PER_UNIT: usize = 128;
+
 /// A registration in progress, for callers that must bound the work per call (the
 /// controller's 100 Hz loop): every [`Registering::step`] does at most `budget` units of
-/// work — a unit is one SOM iteration, one nearest-neighbour scan of a node set (the
+/// work — a unit is [`CHECK_POINTS_PER_UNIT`] target points checked, one SOM iteration, one nearest-neighbour scan of a node set (the
 /// dead-unit scans) or about as much work in the guided model (k-d tree queries for ICP
 /// pairings, labels and rib-fit points, tree building, neighbourhood widening, see
 /// [`TargetSkeleton`]), or one rigid fit — and a stage change is a call of its own. The
@@ -199,6 +204,10 @@ pub struct Registering {
 #[allow(clippy::large_enum_variant)]
 #[derive(Clone)]
 enum Stage {
+    /// The target's points before this index are checked finite and in range.
+    Check(usize),
+    /// The target is checked; its principal axes and initial SOM 1 are next.
+    Axes,
     Graph(GraphBuild),
     Guided(SkeletonGraph, TargetSkeleton),
     Done(Registration),
@@ -206,11 +215,18 @@ enum Stage {
 }
 
 impl Registering {
-    /// Validates the target and prepares its SOM 1 (principal axes, initial map).
-    pub fn start(target: &[Vec3], cfg: &Config) -> Result<Self> {
-        validate(target, Cloud::Target, MIN_CLOUD_POINTS, MAX_CLOUD_POINTS)?;
+    /// Checks the target's point count (O(1)); its points are checked, and its SOM 1
+    /// prepared (principal axes, initial map), by the first steps — a cloud the size of
+    /// [`MAX_CLOUD_POINTS`] is more than one controller call can check.
+    pub fn start(target: &[Vec3], _cfg: &Config) -> Result<Self> {
+        validate_count(
+            target.len(),
+            Cloud::Target,
+            MIN_CLOUD_POINTS,
+            MAX_CLOUD_POINTS,
+        )?;
         Ok(Registering {
-            stage: Stage::Graph(GraphBuild::start(target, Cloud::Target, cfg, false)?),
+            stage: Stage::Check(0),
         })
     }
 
@@ -218,6 +234,7 @@ impl Registering {
     pub fn progress(&self, cfg: &Config) -> (u32, u32) {
         match &self.stage {
             Stage::Graph(g) => g.progress(cfg),
+            Stage::Check(_) | Stage::Axes => (0, cfg.som1.iterations + cfg.som2.iterations),
             _ => {
                 let total = cfg.som1.iterations + cfg.som2.iterations;
                 (total, total)
@@ -225,12 +242,15 @@ impl Registering {
         }
     }
 
-    /// What the next step works on: the skeleton graph's stage ([`GraphBuild::stage`]),
+    /// What the next step works on: `"check"` (the target's points), `"axes"` (its
+    /// principal axes and initial SOM 1), the skeleton graph's stage ([`GraphBuild::stage`]),
     /// then for the guided model
     /// `"index"`, `"coarse"`, `"refine"`, `"label"`, `"fit"`, `"solve"`, `"refit"`, `"carry"`, and
     /// `"done"` (or `"failed"`). For cost reports.
     pub fn stage(&self) -> &'static str {
         match &self.stage {
+            Stage::Check(_) => "check",
+            Stage::Axes => "axes",
             Stage::Graph(build) => build.stage(),
             Stage::Guided(_, t) => match t.stage() {
                 GuidedStage::Index => "index",
@@ -277,6 +297,22 @@ impl Registering {
         budget: u32,
     ) -> Result<bool> {
         match &mut self.stage {
+            Stage::Check(next) => {
+                let end = next
+                    .saturating_add((budget as usize).saturating_mul(CHECK_POINTS_PER_UNIT))
+                    .min(target.len());
+                let chunk = target
+                    .get(*next..end)
+                    .ok_or(Error::Config("the target changed between steps"))?;
+                validate_points(chunk, Cloud::Target, *next)?;
+                // The principal axes are a call of their own.
+                *next = end;
+                if end == target.len() {
+                    self.stage = Stage::Axes;
+                }
+                Ok(false)
+            }
+            Stage::Axes => self.checked(target, cfg),
             Stage::Graph(build) => {
                 // The stage change after the graph is built is a call of its own.
                 let built = build.graph().is_some();
@@ -304,6 +340,13 @@ impl Registering {
             Stage::Done(_) => Ok(true),
             Stage::Failed => Err(Error::Config("the registration failed before")),
         }
+    }
+
+    /// The target is checked: its principal axes and initial SOM 1.
+    #[inline(never)]
+    fn checked(&mut self, target: &[Vec3], cfg: &Config) -> Result<bool> {
+        self.stage = Stage::Graph(GraphBuild::start(target, Cloud::Target, cfg, false)?);
+        Ok(false)
     }
 
     /// The skeleton graph is built: the guided stage starts, or (graph model) the
