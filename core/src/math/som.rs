@@ -89,7 +89,21 @@ impl<const CAP: usize> Som<CAP> {
         let mut best = 0;
         let mut best_d = f32::INFINITY;
         for (k, w) in self.nodes.iter().enumerate() {
-            let d = (w - p).norm_squared();
+            // `(w - p).norm_squared()` summed as nalgebra does, ((x² + y²) + z²), with
+            // an exact early exit: adding a square (≥ 0) never rounds a partial sum
+            // below itself, so a partial sum already ≥ the best cannot win.
+            let dx = w.x - p.x;
+            let d = dx * dx;
+            if d >= best_d {
+                continue;
+            }
+            let dy = w.y - p.y;
+            let d = d + dy * dy;
+            if d >= best_d {
+                continue;
+            }
+            let dz = w.z - p.z;
+            let d = d + dz * dz;
             if d < best_d {
                 best_d = d;
                 best = k;
@@ -214,6 +228,7 @@ impl SomTrainer {
         let (rows, cols) = (cfg.rows, cfg.cols);
         let mut g_row = [0.0f32; MAX_GRID_SIDE];
         let mut g_col = [0.0f32; MAX_GRID_SIDE];
+        let mut gauss = [0.0f32; MAX_GRID_SIDE];
         let last = (cfg.iterations - 1).max(1) as f32;
         let radius_ratio = libm::logf(cfg.radius_end / cfg.radius_start);
         let lr_ratio = libm::logf(cfg.lr_end / cfg.lr_start);
@@ -228,13 +243,17 @@ impl SomTrainer {
             let inv = -0.5 / (sigma * sigma);
             let (r0, r1) = (br.saturating_sub(reach), (br + reach).min(rows - 1));
             let (c0, c1) = (bc.saturating_sub(reach), (bc + reach).min(cols - 1));
-            for (r, g) in g_row.iter_mut().enumerate().take(r1 + 1).skip(r0) {
-                let d = r.abs_diff(br) as f32;
+            // The Gaussian of each grid distance once (rows and columns share them).
+            let far = (br - r0).max(r1 - br).max(bc - c0).max(c1 - bc);
+            for (d, g) in gauss.iter_mut().enumerate().take(far + 1) {
+                let d = d as f32;
                 *g = libm::expf(inv * d * d);
             }
+            for (r, g) in g_row.iter_mut().enumerate().take(r1 + 1).skip(r0) {
+                *g = gauss[r.abs_diff(br)];
+            }
             for (c, g) in g_col.iter_mut().enumerate().take(c1 + 1).skip(c0) {
-                let d = c.abs_diff(bc) as f32;
-                *g = lr * libm::expf(inv * d * d);
+                *g = lr * gauss[c.abs_diff(bc)];
             }
             for (row, gr) in som
                 .nodes
@@ -256,6 +275,40 @@ impl SomTrainer {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The early-exit BMU search equals a plain scan of `norm_squared` distances, the
+    /// first of equal distances winning (coarse coordinates make ties common).
+    #[test]
+    fn bmu_equals_a_plain_scan() {
+        let mut rng = crate::math::rng::Rng::new(11);
+        let coarse = |rng: &mut crate::math::rng::Rng| libm::floorf(rng.next_f32() * 8.0) - 4.0;
+        for _ in 0..200 {
+            let mut nodes = heapless::Vec::<Vec3, 64>::new();
+            for _ in 0..48 {
+                let _ = nodes.push(Vec3::new(
+                    coarse(&mut rng),
+                    coarse(&mut rng),
+                    coarse(&mut rng),
+                ));
+            }
+            let som = Som {
+                rows: 6,
+                cols: 8,
+                nodes,
+            };
+            for _ in 0..50 {
+                let p = Vec3::new(coarse(&mut rng), coarse(&mut rng), coarse(&mut rng) + 0.5);
+                let mut best = (f32::INFINITY, 0);
+                for (k, w) in som.nodes.iter().enumerate() {
+                    let d = (w - p).norm_squared();
+                    if d < best.0 {
+                        best = (d, k);
+                    }
+                }
+                assert_eq!(som.bmu(&p), (best.1 / 8, best.1 % 8));
+            }
+        }
+    }
 
     /// A filled 200 × 80 mm sheet sampled every 4 mm.
     fn sheet() -> heapless::Vec<Vec3, 1071> {
