@@ -33,6 +33,9 @@ pub struct Som<const CAP: usize> {
     nodes: heapless::Vec<Vec3, CAP>,
 }
 
+/// Independent running minima of [`Som::bmu`].
+const LANES: usize = 4;
+
 impl<const CAP: usize> Som<CAP> {
     /// Trains a map on `points` (any non-empty size; nothing is copied) with `frame` the
     /// principal axes of `points` (for the linear initialisation).
@@ -86,27 +89,35 @@ impl<const CAP: usize> Som<CAP> {
 
     /// Grid position (row, column) of the node nearest to `p`; ties go to the first.
     pub fn bmu(&self, p: &Vec3) -> (usize, usize) {
-        let mut best = 0;
-        let mut best_d = f32::INFINITY;
-        for (k, w) in self.nodes.iter().enumerate() {
-            // `(w - p).norm_squared()` summed as nalgebra does, ((x² + y²) + z²), with
-            // an exact early exit: adding a square (≥ 0) never rounds a partial sum
-            // below itself, so a partial sum already ≥ the best cannot win.
-            let dx = w.x - p.x;
-            let d = dx * dx;
-            if d >= best_d {
-                continue;
+        // Four running minima (node k in lane k mod 4), so that each distance waits on
+        // its lane's last comparison, not on every earlier node's: the first node of the
+        // least distance wins either way (each lane keeps its first, then the lowest
+        // index among equal lane minima).
+        let mut lane = [(f32::INFINITY, 0usize); LANES];
+        let chunks = self.nodes.chunks_exact(LANES);
+        let rest = chunks.remainder();
+        for (c, chunk) in chunks.enumerate() {
+            let d: [f32; LANES] = core::array::from_fn(|l| (chunk[l] - p).norm_squared());
+            // Indexed, not zipped: the zipped loop measured 10 % slower on the host
+            // (whole `register`), its lanes no longer kept in registers.
+            #[allow(clippy::needless_range_loop)]
+            for l in 0..LANES {
+                if d[l] < lane[l].0 {
+                    lane[l] = (d[l], c * LANES + l);
+                }
             }
-            let dy = w.y - p.y;
-            let d = d + dy * dy;
-            if d >= best_d {
-                continue;
+        }
+        let first = self.nodes.len() - rest.len();
+        for (j, w) in rest.iter().enumerate() {
+            let d = (w - p).norm_squared();
+            if d < lane[j].0 {
+                lane[j] = (d, first + j);
             }
-            let dz = w.z - p.z;
-            let d = d + dz * dz;
-            if d < best_d {
-                best_d = d;
-                best = k;
+        }
+        let (mut best_d, mut best) = lane[0];
+        for &(d, k) in &lane[1..] {
+            if d < best_d || (d == best_d && k < best) {
+                (best_d, best) = (d, k);
             }
         }
         (best / self.cols.max(1), best % self.cols.max(1))
@@ -276,26 +287,24 @@ impl SomTrainer {
 mod tests {
     use super::*;
 
-    /// The early-exit BMU search equals a plain scan of `norm_squared` distances, the
+    /// The four-lane BMU search equals a plain scan of `norm_squared` distances, the
     /// first of equal distances winning (coarse coordinates make ties common).
     #[test]
     fn bmu_equals_a_plain_scan() {
         let mut rng = crate::math::rng::Rng::new(11);
         let coarse = |rng: &mut crate::math::rng::Rng| libm::floorf(rng.next_f32() * 8.0) - 4.0;
         for _ in 0..200 {
+            // 48 nodes fill the four lanes evenly, 35 leave a remainder.
+            let (rows, cols) = if rng.below(2) == 0 { (6, 8) } else { (5, 7) };
             let mut nodes = heapless::Vec::<Vec3, 64>::new();
-            for _ in 0..48 {
+            for _ in 0..rows * cols {
                 let _ = nodes.push(Vec3::new(
                     coarse(&mut rng),
                     coarse(&mut rng),
                     coarse(&mut rng),
                 ));
             }
-            let som = Som {
-                rows: 6,
-                cols: 8,
-                nodes,
-            };
+            let som = Som { rows, cols, nodes };
             for _ in 0..50 {
                 let p = Vec3::new(coarse(&mut rng), coarse(&mut rng), coarse(&mut rng) + 0.5);
                 let mut best = (f32::INFINITY, 0);
@@ -305,7 +314,7 @@ mod tests {
                         best = (d, k);
                     }
                 }
-                assert_eq!(som.bmu(&p), (best.1 / 8, best.1 % 8));
+                assert_eq!(som.bmu(&p), (best.1 / cols, best.1 % cols));
             }
         }
     }
