@@ -26,7 +26,7 @@ use static_cell::ConstStaticCell;
 /// Derivation: the loop's receive step drains the queue at least every other turn
 /// (it is skipped only in the turn after one that took a frame), and a turn lasts at
 /// most 168,000 instructions, 1 ms at 168 MHz (`meter::LONG_CALL`, enforced by
-/// `ribreg hil`; measured worst 142,690 on the F405). At the recommended 921,600 baud
+/// `ribreg hil`; measured worst 140,595 on the F405). At the recommended 921,600 baud
 /// (10 bits a byte, 92.16 bytes/ms) at most 2 × 92.16 = 185 bytes arrive back to back
 /// between two drains. A drain stops at the end of the first complete frame, so the
 /// bytes of the next frames wait too: replaying the default sweep's real frames (up to

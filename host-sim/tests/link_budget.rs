@@ -10,7 +10,7 @@
 //!   the procedure's real byte stream arriving back to back, with the loop's receive step
 //!   draining it only every other turn and every turn as long as the budget allows
 //!   (168,000 instructions at 168 MHz, the most `ribreg hil` accepts; measured worst:
-//!   142,690 on the F405, 142,640 on MPS2), and the RX interrupt's latency, from the
+//!   140,595 on the F405, 141,360 on MPS2), and the RX interrupt's latency, from the
 //!   instructions its handler and the longest masked section take, within one byte time.
 //!
 //! Ten bits a byte on the wire (8N1). Instructions are taken as cycles at 168 MHz (one

@@ -307,16 +307,28 @@ impl LocalRigid {
 
 /// `extra` more indices of `points` nearest to `p` (ties to the lower index) added to `have`.
 fn nearest_set(points: &[Vec3; SKELETON_POINTS], p: &Vec3, extra: usize, have: u32) -> u32 {
-    let mut order: [(f32, u8); SKELETON_POINTS] =
-        core::array::from_fn(|i| ((points[i] - p).norm_squared(), i as u8));
+    // The order (distance by `f32::total_cmp`, then index) as one integer key: the
+    // distance's bits mapped as `total_cmp` orders them, above the index.
+    let mut order: [u64; SKELETON_POINTS] = core::array::from_fn(|i| {
+        let bits = (points[i] - p).norm_squared().to_bits();
+        let key = if bits >> 31 == 1 {
+            !bits
+        } else {
+            bits | 1 << 31
+        };
+        (u64::from(key) << 8) | i as u64
+    });
     // A full sort of 30, not `extra` minimum searches: the searches are faster on the
     // host but slower on the Cortex-M4F, where they pushed a control-loop turn from
-    // 139 k to 178 k instructions (budget 168 k).
-    order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    // 139 k to 178 k instructions (budget 168 k). The integer keys sort in a quarter of
+    // the instructions of the pairs compared by a closure (callgrind, one host
+    // `register`: 18.2 M → 5.0 M).
+    order.sort_unstable();
     let mut mask = have;
-    for &(_, i) in order
+    for i in order
         .iter()
-        .filter(|(_, i)| have & (1 << i) == 0)
+        .map(|&k| (k & 0xff) as u32)
+        .filter(|i| have & (1 << i) == 0)
         .take(extra)
     {
         mask |= 1 << i;
