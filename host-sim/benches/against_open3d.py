@@ -12,8 +12,9 @@ Ours: the wall time of the whole `ribreg register` process (start, read the prep
 template and the target, register, map the template and the waypoints, ED/HD, write
 every output). Open3D: the wall time of one `registration_icp` call alone (point to
 point, identity start, 20 mm correspondence distance, at most 100 iterations), the
-clouds already in memory and no KD-tree reuse between calls. Medians over the repeats;
-the ratio per seed and over all seeds is printed.
+clouds already in memory and no KD-tree reuse between calls. The two alternate, one of
+each per repeat; medians over the repeats; the ratio per seed and over all seeds is
+printed.
 """
 
 import argparse
@@ -57,11 +58,6 @@ def main() -> int:
             reg = ["register", "--template", str(d / "prepared.ply"), "--target", str(d / "target.ply"),
                    "--waypoints", str(d / "waypoints.csv"), "--out", str(d / "out.ply"),
                    "--out-waypoints", str(d / "out.csv")]
-            ours = []
-            for _ in range(args.repeats):
-                t = time.perf_counter()
-                run(*reg)
-                ours.append(time.perf_counter() - t)
             src = o3d.io.read_point_cloud(str(d / "t.ply"))
             if args.spacing:
                 # Back from the CT's world to the phantom's frame (ribreg_sim::phantom::ct::
@@ -69,8 +65,13 @@ def main() -> int:
                 # needs no start.
                 src.translate([-18.0, 412.0, -75.0])
             tgt = o3d.io.read_point_cloud(str(d / "target.ply"))
-            theirs = []
+            # Interleaved, one of each per repeat, so that a slow spell of a shared machine
+            # falls on both.
+            ours, theirs = [], []
             for _ in range(args.repeats):
+                t = time.perf_counter()
+                run(*reg)
+                ours.append(time.perf_counter() - t)
                 t = time.perf_counter()
                 o3d.pipelines.registration.registration_icp(
                     src, tgt, 20.0, np.eye(4),

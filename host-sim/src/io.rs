@@ -796,6 +796,58 @@ pub(crate) fn write_atomic(
     result
 }
 
+/// One output file and what writes it, for [`write_all_or_none`].
+pub type Output<'a> = (
+    &'a Path,
+    Box<dyn FnOnce() -> Result<(), IoError> + Send + 'a>,
+);
+
+/// Writes every output, each on a thread of its own so that their `fsync`s overlap (each
+/// file is written atomically, by its own writer's [`write_atomic`]). If any fails, the
+/// others that were written are removed and the first failure in the given order is
+/// returned: a run leaves all of its outputs or none.
+pub fn write_all_or_none(outputs: Vec<Output<'_>>) -> Result<(), IoError> {
+    let results: Vec<(&Path, Result<(), IoError>)> = std::thread::scope(|s| {
+        let mut outputs = outputs.into_iter();
+        let first = outputs.next();
+        let others: Vec<_> = outputs
+            .map(|(path, write)| (path, s.spawn(write)))
+            .collect();
+        let mut results: Vec<_> = first
+            .map(|(path, write)| (path, write()))
+            .into_iter()
+            .collect();
+        for (path, handle) in others {
+            // A writer that panicked goes on panicking here.
+            let result = handle
+                .join()
+                .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+            results.push((path, result));
+        }
+        results
+    });
+    let mut written = Vec::new();
+    let mut failure = None;
+    for (path, result) in results {
+        match result {
+            Ok(()) => written.push(path),
+            Err(e) => {
+                failure.get_or_insert(e);
+            }
+        }
+    }
+    match failure {
+        Some(e) => {
+            for path in written {
+                // Best effort: the file is ours, written by this run.
+                let _ = fs::remove_file(path);
+            }
+            Err(e)
+        }
+        None => Ok(()),
+    }
+}
+
 /// Test support: the next value of a small deterministic generator (an LCG) for the
 /// readers' garbage tests.
 #[cfg(test)]

@@ -11,7 +11,7 @@ use crate::io::{self, Cloud, PlyFormat};
 use ribreg_core::config::{Config, RIBS, RIB_SAMPLES};
 use ribreg_core::error::Cloud as Which;
 use ribreg_core::registration::local_rigid::TransformCache;
-use ribreg_core::registration::metrics::{compare, Metrics};
+use ribreg_core::registration::metrics::Metrics;
 use ribreg_core::registration::pipeline::{register, Registration, Template};
 use ribreg_core::registration::{anterior, guided};
 
@@ -331,7 +331,7 @@ pub fn register_prepared(
         ms(t_map)
     ));
     let t3 = Instant::now();
-    let metrics = compare(&mut registered.clone(), &mut target.to_vec());
+    let metrics = compare_on_two_threads(&registered, target);
     let t_metrics = t3.elapsed();
     progress(&format!(
         "ED {:.2} ± {:.2} mm (max {:.2}), HD {:.2} mm ({:.1} ms)",
@@ -450,6 +450,24 @@ fn confidence_json(reg: &Registration) -> Value {
         "max_residual_mm": guided::MAX_POSE_RESIDUAL_MM,
         "min_margin": guided::MIN_POSE_MARGIN,
     })
+}
+
+/// [`ribreg_core::registration::metrics::compare`]'s figures, its two directions on two
+/// threads.
+fn compare_on_two_threads(registered: &[Vec3], target: &[Vec3]) -> Metrics {
+    use ribreg_core::registration::metrics::{closest_distances, KdTree};
+    std::thread::scope(|s| {
+        let back = s.spawn(|| closest_distances(target, &KdTree::build(&mut registered.to_vec())));
+        let ed = closest_distances(registered, &KdTree::build(&mut target.to_vec()));
+        Metrics::from_directed(ed, joined(back))
+    })
+}
+
+/// A scoped thread's result; its panic, if it panicked, goes on in this thread.
+fn joined<T>(handle: std::thread::ScopedJoinHandle<'_, T>) -> T {
+    handle
+        .join()
+        .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
 }
 
 fn rows(m: &nalgebra::Matrix3<f32>) -> Vec<[f32; 3]> {
@@ -575,54 +593,49 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
         }
         None => register_clouds(&tpl, labels.as_deref(), &tgt, wps.as_deref(), how, progress)?,
     };
-    let t1 = Instant::now();
-    let mut written: Vec<&Path> = Vec::new();
-    let result = (|| -> Result<(), CliError> {
-        let out = Cloud {
-            points: to_file(&outcome.registered),
-            labels: template.labels.clone(),
-        };
-        let format = if job.ascii {
-            PlyFormat::Ascii
-        } else {
-            PlyFormat::BinaryLittleEndian
-        };
-        io::write_ply(&job.out, &out, format)?;
-        written.push(&job.out);
-        if let (Some(path), Some(w)) = (&job.out_waypoints, &outcome.waypoints) {
-            let labels = planned
-                .as_ref()
-                .map(|p| p.labels.clone())
-                .unwrap_or_default();
-            io::write_waypoints(
-                path,
-                &io::Waypoints {
-                    points: to_file(w),
-                    labels,
-                },
-            )?;
-            written.push(path);
-        }
-        if let Some(path) = &job.report {
+    let report_text = match &job.report {
+        Some(_) => {
             outcome.report["files"] = json!({
                 "template": job.template, "target": job.target, "waypoints": job.waypoints,
                 "out": job.out, "out_waypoints": job.out_waypoints,
             });
             outcome.report["timings_ms"]["read"] = json!(ms(t_read));
             outcome.report["timings_ms"]["total_before_write"] = json!(ms(t0.elapsed()));
-            let text = serde_json::to_string_pretty(&outcome.report)
-                .map_err(|e| CliError::Output(format!("report: {e}")))?;
-            io::write_text(path, &text)?;
-            written.push(path);
+            Some(
+                serde_json::to_string_pretty(&outcome.report)
+                    .map_err(|e| CliError::Output(format!("report: {e}")))?,
+            )
         }
-        Ok(())
-    })();
-    if let Err(e) = result {
-        for p in written {
-            let _ = std::fs::remove_file(p);
-        }
-        return Err(e);
+        None => None,
+    };
+    let t1 = Instant::now();
+    let out = Cloud {
+        points: to_file(&outcome.registered),
+        labels: template.labels.clone(),
+    };
+    let format = if job.ascii {
+        PlyFormat::Ascii
+    } else {
+        PlyFormat::BinaryLittleEndian
+    };
+    let mut writes: Vec<io::Output<'_>> = vec![(
+        &job.out,
+        Box::new(move || io::write_ply(&job.out, &out, format)),
+    )];
+    if let (Some(path), Some(w)) = (&job.out_waypoints, &outcome.waypoints) {
+        let waypoints = io::Waypoints {
+            points: to_file(w),
+            labels: planned.map(|p| p.labels).unwrap_or_default(),
+        };
+        writes.push((
+            path,
+            Box::new(move || io::write_waypoints(path, &waypoints)),
+        ));
     }
+    if let (Some(path), Some(text)) = (&job.report, report_text) {
+        writes.push((path, Box::new(move || io::write_text(path, &text))));
+    }
+    io::write_all_or_none(writes)?;
     progress(&format!("wrote outputs ({:.1} ms)", ms(t1.elapsed())));
     Ok(outcome)
 }

@@ -55,6 +55,41 @@ fn assert_refused(out: &Output, needle: &str, outputs: &[&Path]) {
     }
 }
 
+/// The outputs are written side by side (their `fsync`s overlap): when one cannot be
+/// written, the others are removed again, whichever finished first.
+#[test]
+fn register_leaves_no_output_when_one_cannot_be_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let (t, u, w, _) = inputs(dir.path());
+    let (out, ow) = (dir.path().join("m.ply"), dir.path().join("m.csv"));
+    for (ply, csv, report) in [
+        (out.clone(), ow.clone(), dir.path().join("no-dir/r.json")),
+        (
+            dir.path().join("no-dir/m.ply"),
+            ow.clone(),
+            dir.path().join("r.json"),
+        ),
+    ] {
+        let o = ribreg(&[
+            "register",
+            "--template",
+            s(&t),
+            "--target",
+            s(&u),
+            "--waypoints",
+            s(&w),
+            "--out",
+            s(&ply),
+            "--out-waypoints",
+            s(&csv),
+            "--report",
+            s(&report),
+            "--quiet",
+        ]);
+        assert_refused(&o, "no-dir", &[&ply, &csv, &report]);
+    }
+}
+
 #[test]
 fn register_writes_every_output_in_template_order() {
     let dir = tempfile::tempdir().unwrap();

@@ -122,16 +122,24 @@ pub struct Metrics {
     pub hausdorff: f32,
 }
 
+impl Metrics {
+    /// From the closest-point distances of each registered point to the target (`ed`)
+    /// and of each target point to the registered points (`back`).
+    pub fn from_directed(ed: DistanceStats, back: DistanceStats) -> Self {
+        Metrics {
+            ed,
+            hausdorff: ed.max.max(back.max),
+        }
+    }
+}
+
 /// Computes [`Metrics`]; both slices are reordered (they become k-d trees).
 pub fn compare(registered: &mut [Vec3], target: &mut [Vec3]) -> Metrics {
     let target_tree = KdTree::build(target);
     let ed = closest_distances(registered, &target_tree);
     let reg_tree = KdTree::build(registered);
     let back = closest_distances(target_tree.points(), &reg_tree);
-    Metrics {
-        ed,
-        hausdorff: ed.max.max(back.max),
-    }
+    Metrics::from_directed(ed, back)
 }
 
 #[cfg(test)]
