@@ -19,6 +19,7 @@ fn run_with(pair: &PhantomPair, target_up: Option<[f64; 3]>) -> Result<f64, Erro
     let how = Options {
         method: Method::Improved,
         target_up: target_up.map(|u| ribreg_core::Vec3::new(u[0] as f32, u[1] as f32, u[2] as f32)),
+        ..Options::default()
     };
     let tpl = to_core(&pair.template.points, Cloud::Template).unwrap();
     let tgt = to_core(&pair.target, Cloud::Target).unwrap();

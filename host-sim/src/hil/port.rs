@@ -58,6 +58,14 @@ impl InProcess {
         }
     }
 
+    /// `us` pass and the controller is polled once, at their end: a main loop that was
+    /// late (the fuzz target's time steps; [`Port::advance`] polls every ms).
+    pub fn advance_late(&mut self, us: u64) {
+        self.now_us += us;
+        self.controller.poll(self.now_us);
+        self.drain();
+    }
+
     fn drain(&mut self) {
         let mut buf = [0u8; MAX_FRAME];
         while let Some((seq, msg)) = self.controller.next_reply() {

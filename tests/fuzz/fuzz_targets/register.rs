@@ -1,11 +1,13 @@
 //! The whole registration (prepare the template, register, map the template and the
 //! waypoints, measure) on structured-arbitrary clouds: any coordinates (NaN, ±∞, huge),
 //! labels, sizes. An error or a result, never a panic; mapped points are finite.
+//! The SOMs train for a twentieth of the paper's iterations: every stage's code runs,
+//! at a cost that lets the fuzzer reach millions of executions.
 #![no_main]
 use arbitrary::Arbitrary;
 use libfuzzer_sys::fuzz_target;
 use ribreg_core::Vec3;
-use ribreg_sim::register::{register_clouds, Method};
+use ribreg_sim::register::{register_clouds, Method, Options};
 
 #[derive(Arbitrary, Debug)]
 struct Input {
@@ -55,17 +57,21 @@ fuzz_target!(|input: Input| {
             target[i - template.len()] = q;
         }
     }
-    let method = if input.paper {
-        Method::Paper
-    } else {
-        Method::Improved
+    let how = Options {
+        method: if input.paper {
+            Method::Paper
+        } else {
+            Method::Improved
+        },
+        target_up: None,
+        som_iterations: Some((300, 150)),
     };
     if let Ok(out) = register_clouds(
         &template,
         Some(&labels),
         &target,
         Some(&waypoints),
-        method,
+        how,
         &mut |_| {},
     ) {
         assert!(out

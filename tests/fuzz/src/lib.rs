@@ -26,7 +26,10 @@ pub enum Op<'a> {
     Seq(u16, &'a [u8]),
     /// Tag 2, length byte, bytes: raw bytes on the link, then a delimiter.
     Raw(&'a [u8]),
-    /// Tag 3, one byte: that many ms pass (the controller polled every ms).
+    /// Tag 3, one byte: that many ms pass, the controller polled once at their end (a
+    /// late main loop). One poll, not one a ms: a registering controller's poll is a
+    /// registration step, and the states along the registration are reached by the
+    /// snapshots, so each input stays cheap (see [`start`]).
     Advance(u8),
 }
 
@@ -258,7 +261,10 @@ impl Run {
                 self.feed(bytes);
                 self.feed(&[0]);
             }
-            Op::Advance(ms) => self.advance(u64::from(*ms) * 1000),
+            Op::Advance(ms) => {
+                self.port.advance_late(u64::from(*ms) * 1000);
+                self.drain();
+            }
         }
     }
 
