@@ -803,7 +803,7 @@ pub type Output<'a> = (
 );
 
 /// Writes every output, each on a thread of its own so that their `fsync`s overlap (each
-/// file is written atomically, by its own writer's [`write_atomic`]). If any fails, the
+/// file is written atomically, by its own writer's `write_atomic`). If any fails, the
 /// others that were written are removed and the first failure in the given order is
 /// returned: a run leaves all of its outputs or none.
 pub fn write_all_or_none(outputs: Vec<Output<'_>>) -> Result<(), IoError> {
