@@ -357,12 +357,25 @@ impl fmt::Display for Error {
                 write!(
                     f,
                     "the target's pose is ambiguous: the best pose hypothesis fits with {:.1} mm \
-                     residual (at most {:.1} mm accepted) and the next distinct one with {:.1} mm \
-                     (at least {min_margin_percent} % of the best's needed); is the sweep of the \
-                     rib cartilage? scan more of both sides and register again",
+                     residual (at most {:.1} mm accepted) and ",
                     mm(residual_dmm),
                     mm(max_residual_dmm),
-                    mm(runner_up_dmm),
+                )?;
+                // A saturated runner-up is none (or one beyond 6,553 mm): no number.
+                if runner_up_dmm == u16::MAX {
+                    write!(f, "no distinct one was found to compare it with")?;
+                } else {
+                    write!(
+                        f,
+                        "the next distinct one with {:.1} mm (at least {min_margin_percent} % \
+                         of the best's needed)",
+                        mm(runner_up_dmm),
+                    )?;
+                }
+                write!(
+                    f,
+                    "; is the sweep of the rib cartilage? scan more of both sides and register \
+                     again"
                 )
             }
         }

@@ -5,7 +5,7 @@
 
 use clap::{Parser, Subcommand};
 use ribreg_sim::error::CliError;
-use ribreg_sim::phantom::{PhantomConfig, Variant};
+use ribreg_sim::phantom::{HardPart, PhantomConfig, Preset, Variant};
 use ribreg_sim::register::RegisterJob;
 
 mod calibrate;
@@ -100,6 +100,14 @@ pub struct PhantomArgs {
     /// Pose of the US target: a few degrees/mm, or up to ~20° and ~40 mm.
     #[arg(long, value_enum, default_value_t = Variant::Aligned)]
     variant: Variant,
+    /// Family of phantoms: `standard` (every figure before the hard ones), or `hard`
+    /// (wider patients, a longer sternum, tip holes, partly seen junctions, breathing).
+    #[arg(long, value_enum, default_value_t = Preset::Standard)]
+    preset: Preset,
+    /// With `--preset hard`: difficulties to leave out, comma-separated (an ablation of
+    /// the phantom).
+    #[arg(long, value_enum, value_delimiter = ',')]
+    hard_without: Vec<HardPart>,
 }
 
 impl PhantomArgs {
@@ -108,6 +116,8 @@ impl PhantomArgs {
         PhantomConfig {
             seed: self.seed,
             variant: self.variant,
+            preset: self.preset,
+            hard_without: self.hard_without.clone(),
             ..PhantomConfig::default()
         }
     }

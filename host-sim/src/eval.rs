@@ -9,7 +9,9 @@ use crate::baselines;
 use crate::demo::write_figures;
 use crate::error::CliError;
 use crate::io;
-use crate::phantom::{PhantomConfig, PhantomPair, Variant};
+use crate::phantom::{
+    HardPart, Part, PhantomConfig, PhantomPair, Preset, Variant, STERNUM_LABEL, WAYPOINT_PLAN,
+};
 use crate::plot::{self, Series};
 use crate::register::{register_clouds, to_core, to_file, Method};
 use crate::stats::{paired_t_test, Summary};
@@ -61,8 +63,12 @@ impl EvalMethod {
 /// What `eval` runs.
 #[derive(Clone, Debug)]
 pub struct EvalConfig {
-    /// Phantom pairs per variant (seeds `0..pairs`).
+    /// Phantom pairs per variant and preset (seeds `0..pairs`).
     pub pairs: u64,
+    /// Phantom families.
+    pub presets: Vec<Preset>,
+    /// Difficulties the hard phantoms leave out.
+    pub hard_without: Vec<HardPart>,
     /// Pose variants.
     pub variants: Vec<Variant>,
     /// Methods.
@@ -72,10 +78,12 @@ pub struct EvalConfig {
 }
 
 /// One method on one phantom pair.
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct CaseResult {
     /// Method name.
     pub method: String,
+    /// Phantom family: `standard` or `hard`.
+    pub preset: String,
     /// `aligned` or `misaligned`.
     pub variant: String,
     /// Phantom seed.
@@ -88,10 +96,41 @@ pub struct CaseResult {
     pub hd: f64,
     /// Registered template points against their true positions (mm).
     pub dense: Summary,
+    /// The same by structure: [`STRUCTURES`] (the sternum, then ribs 2..5).
+    pub dense_by_structure: Vec<Summary>,
+    /// Mean dense error of the cartilage points (every rib, both sides) in each of
+    /// [`ALONG_BINS`] equal stretches from the sternum (material s 0) to the lateral tip
+    /// (s 1), mm (NaN where a stretch holds no point).
+    pub dense_along_cartilage: Vec<f64>,
     /// Per-waypoint errors (mm), waypoint order.
     pub waypoint_errors: Vec<f64>,
     /// Wall time of the registration and mapping (ms).
     pub runtime_ms: f64,
+}
+
+/// The structures of [`CaseResult::dense_by_structure`], by template label.
+pub const STRUCTURES: [(&str, i32); 5] = [
+    ("sternum", STERNUM_LABEL),
+    ("rib 2", 2),
+    ("rib 3", 3),
+    ("rib 4", 4),
+    ("rib 5", 5),
+];
+/// Stretches along the cartilage of [`CaseResult::dense_along_cartilage`].
+pub const ALONG_BINS: usize = 5;
+
+/// The position class of waypoint `i` (index into [`WAYPOINT_PLAN`]; both sides share
+/// one): "gap 2–3, medial (s 0.35)".
+fn waypoint_class(i: usize) -> String {
+    let (upper, s) = WAYPOINT_PLAN[i % WAYPOINT_PLAN.len()];
+    let where_ = if s < 0.5 {
+        "medial"
+    } else if s > 0.5 {
+        "lateral"
+    } else {
+        "middle"
+    };
+    format!("gap {upper}–{}, {where_} (s {s})", upper + 1)
 }
 
 fn variant_name(v: Variant) -> &'static str {
@@ -141,12 +180,15 @@ fn run_method(m: EvalMethod, pair: &PhantomPair) -> Result<Mapped, String> {
 fn evaluate(m: EvalMethod, pair: &PhantomPair, variant: Variant, seed: u64) -> CaseResult {
     let mut r = CaseResult {
         method: m.name(),
+        preset: pair.config.preset.name().into(),
         variant: variant_name(variant).into(),
         seed,
         error: None,
         ed: Summary::default(),
         hd: f64::NAN,
         dense: Summary::default(),
+        dense_by_structure: vec![],
+        dense_along_cartilage: vec![],
         waypoint_errors: vec![],
         runtime_ms: f64::NAN,
     };
@@ -171,6 +213,7 @@ fn evaluate(m: EvalMethod, pair: &PhantomPair, variant: Variant, seed: u64) -> C
             let truth = pair.true_positions();
             let d: Vec<f64> = dense.iter().zip(&truth).map(|(a, b)| dist(a, b)).collect();
             r.dense = Summary::of(&d);
+            (r.dense_by_structure, r.dense_along_cartilage) = dense_breakdown(pair, &d);
             r.waypoint_errors = wps
                 .iter()
                 .zip(&pair.true_waypoints)
@@ -180,6 +223,37 @@ fn evaluate(m: EvalMethod, pair: &PhantomPair, variant: Variant, seed: u64) -> C
         }
     }
     r
+}
+
+/// Per-point dense errors `d` of `pair`'s template by structure and along the cartilage.
+fn dense_breakdown(pair: &PhantomPair, d: &[f64]) -> (Vec<Summary>, Vec<f64>) {
+    let by_structure = STRUCTURES
+        .iter()
+        .map(|&(_, label)| {
+            let v: Vec<f64> = d
+                .iter()
+                .zip(&pair.template.labels)
+                .filter(|(_, &l)| l == label)
+                .map(|(e, _)| *e)
+                .collect();
+            Summary::of(&v)
+        })
+        .collect();
+    let mut sum = [0.0; ALONG_BINS];
+    let mut count = [0usize; ALONG_BINS];
+    for (e, m) in d.iter().zip(&pair.template.material) {
+        if let Part::Cartilage { .. } = m.part {
+            let b = ((m.s.clamp(0.0, 1.0) * ALONG_BINS as f64) as usize).min(ALONG_BINS - 1);
+            sum[b] += e;
+            count[b] += 1;
+        }
+    }
+    let along = sum
+        .iter()
+        .zip(count)
+        .map(|(s, n)| if n > 0 { s / n as f64 } else { f64::NAN })
+        .collect();
+    (by_structure, along)
 }
 
 fn dist(a: &[f64; 3], b: &[f64; 3]) -> f64 {
@@ -225,27 +299,44 @@ fn parallel<C: Sync, R: Send>(
     results.into_inner().unwrap_or_else(|p| p.into_inner())
 }
 
-/// Creates the output folder; the (variant, seed) of every pair `cfg` asks for.
-fn prepare(cfg: &EvalConfig, out: &Path) -> Result<Vec<(Variant, u64)>, CliError> {
+/// One phantom pair of an evaluation.
+type PairId = (Preset, Variant, u64);
+
+/// Creates the output folder; the (preset, variant, seed) of every pair `cfg` asks for.
+fn prepare(cfg: &EvalConfig, out: &Path) -> Result<Vec<PairId>, CliError> {
     std::fs::create_dir_all(out).map_err(|source| io::IoError::Io {
         path: out.to_owned(),
         op: "cannot create the directory",
         source,
     })?;
     Ok(cfg
-        .variants
+        .presets
         .iter()
-        .flat_map(|&v| (0..cfg.pairs).map(move |s| (v, s)))
+        .flat_map(|&p| {
+            cfg.variants
+                .iter()
+                .flat_map(move |&v| (0..cfg.pairs).map(move |s| (p, v, s)))
+        })
         .collect())
 }
 
-/// The phantom pair of one (variant, seed).
-fn phantom(variant: Variant, seed: u64) -> PhantomPair {
+/// The phantom pair of one (preset, variant, seed).
+fn phantom(cfg: &EvalConfig, &(preset, variant, seed): &PairId) -> PhantomPair {
     PhantomPair::generate(&PhantomConfig {
         seed,
         variant,
+        preset,
+        hard_without: cfg.hard_without.clone(),
         ..PhantomConfig::default()
     })
+}
+
+/// The (preset, variant) groups of `cfg`, in table order, with their names.
+fn groups(cfg: &EvalConfig) -> Vec<(&'static str, &'static str)> {
+    cfg.presets
+        .iter()
+        .flat_map(|p| cfg.variants.iter().map(|&v| (p.name(), variant_name(v))))
+        .collect()
 }
 
 /// Runs the evaluation and writes `out/table.md`, `out/results.json` and the figures.
@@ -257,17 +348,21 @@ pub fn run_eval(
 ) -> Result<String, CliError> {
     let cases = prepare(cfg, out)?;
     let what = format!("pairs ({} methods each)", cfg.methods.len());
-    let mut results = parallel(&cases, cfg.jobs, &what, progress, |&(variant, seed)| {
-        let pair = phantom(variant, seed);
+    let mut results = parallel(&cases, cfg.jobs, &what, progress, |id| {
+        let pair = phantom(cfg, id);
         cfg.methods
             .iter()
-            .map(|&m| evaluate(m, &pair, variant, seed))
+            .map(|&m| evaluate(m, &pair, id.1, id.2))
             .collect()
     });
-    results.sort_by(|a, b| (&a.variant, a.seed, &a.method).cmp(&(&b.variant, b.seed, &b.method)));
+    results.sort_by(|a, b| {
+        (&a.preset, &a.variant, a.seed, &a.method).cmp(&(&b.preset, &b.variant, b.seed, &b.method))
+    });
     let table = markdown(cfg, &results);
     io::write_text(&out.join("table.md"), &table)?;
-    let json = json!({ "pairs": cfg.pairs, "methods": cfg.methods.iter().map(|m| m.name()).collect::<Vec<_>>(),
+    let json = json!({ "pairs": cfg.pairs,
+        "presets": cfg.presets.iter().map(|p| p.name()).collect::<Vec<_>>(),
+        "hard_without": cfg.hard_without, "methods": cfg.methods.iter().map(|m| m.name()).collect::<Vec<_>>(),
         "summary": summary_json(cfg, &results), "cases": results });
     let text = serde_json::to_string_pretty(&json)
         .map_err(|e| CliError::Output(format!("results: {e}")))?;
@@ -276,15 +371,22 @@ pub fn run_eval(
     Ok(table)
 }
 
-fn rows<'a>(results: &'a [CaseResult], m: &str, v: &str) -> impl Iterator<Item = &'a CaseResult> {
-    let (m, v) = (m.to_string(), v.to_string());
+/// A (preset, variant) group of pairs.
+type Group = (&'static str, &'static str);
+
+fn rows<'a>(
+    results: &'a [CaseResult],
+    m: &str,
+    (p, v): Group,
+) -> impl Iterator<Item = &'a CaseResult> {
+    let m = m.to_string();
     results
         .iter()
-        .filter(move |r| r.method == m && r.variant == v)
+        .filter(move |r| r.method == m && r.preset == p && r.variant == v)
 }
 
 /// Per-waypoint errors of a method, in (seed, waypoint) order, failed cases left out.
-fn waypoint_errors(results: &[CaseResult], m: &str, v: &str) -> Vec<(u64, usize, f64)> {
+fn waypoint_errors(results: &[CaseResult], m: &str, v: Group) -> Vec<(u64, usize, f64)> {
     rows(results, m, v)
         .filter(|r| r.error.is_none())
         .flat_map(|r| {
@@ -298,8 +400,7 @@ fn waypoint_errors(results: &[CaseResult], m: &str, v: &str) -> Vec<(u64, usize,
 
 fn summary_json(cfg: &EvalConfig, results: &[CaseResult]) -> Value {
     let mut out = serde_json::Map::new();
-    for &v in &cfg.variants {
-        let v = variant_name(v);
+    for v in groups(cfg) {
         let mut per = serde_json::Map::new();
         for m in &cfg.methods {
             let name = m.name();
@@ -327,13 +428,13 @@ fn summary_json(cfg: &EvalConfig, results: &[CaseResult]) -> Value {
                 }),
             );
         }
-        out.insert(v.into(), Value::Object(per));
+        out.insert(format!("{}, {}", v.0, v.1), Value::Object(per));
     }
     Value::Object(out)
 }
 
 /// Paired t-test of the waypoint errors of `ours` against `other` (pairs present in both).
-fn t_test(results: &[CaseResult], ours: &str, other: &str, v: &str) -> Option<(f64, f64)> {
+fn t_test(results: &[CaseResult], ours: &str, other: &str, v: Group) -> Option<(f64, f64)> {
     if ours == other {
         return None;
     }
@@ -351,14 +452,21 @@ fn markdown(cfg: &EvalConfig, results: &[CaseResult]) -> String {
     let ours = cfg.methods[0].name();
     let _ = writeln!(
         s,
-        "Phantom pairs per variant: {} (seeds 0..{}). Errors in mm, mean ± SD over pairs \
+        "Phantom pairs per preset and variant: {} (seeds 0..{}). Errors in mm, mean ± SD over pairs \
          (waypoints: over all waypoints of all pairs); p: paired t-test of the waypoint \
          errors against {ours}.\n",
         cfg.pairs, cfg.pairs
     );
-    for &v in &cfg.variants {
-        let v = variant_name(v);
-        let _ = writeln!(s, "### {v}\n");
+    if cfg.presets.contains(&Preset::Hard) && !cfg.hard_without.is_empty() {
+        let names: Vec<&str> = cfg.hard_without.iter().map(|p| p.name()).collect();
+        let _ = writeln!(
+            s,
+            "Hard phantoms without: {} (an ablation of the phantom).\n",
+            names.join(", ")
+        );
+    }
+    for v in groups(cfg) {
+        let _ = writeln!(s, "### {} phantoms, {}\n", v.0, v.1);
         let _ = writeln!(
             s,
             "| method | failed | ED mean | ED max | HD | dense error | waypoint error | waypoint max | runtime (median) | p vs {ours} |"
@@ -409,14 +517,16 @@ fn markdown(cfg: &EvalConfig, results: &[CaseResult]) -> String {
         }
         let _ = writeln!(s);
     }
+    breakdown(&mut s, cfg, results);
     let failures: Vec<&CaseResult> = results.iter().filter(|r| r.error.is_some()).collect();
     if !failures.is_empty() {
         let _ = writeln!(s, "Failures:\n");
         for r in failures {
             let _ = writeln!(
                 s,
-                "- {} {} seed {}: {}",
+                "- {} {} {} seed {}: {}",
                 r.method,
+                r.preset,
                 r.variant,
                 r.seed,
                 r.error.as_deref().unwrap_or("")
@@ -428,8 +538,7 @@ fn markdown(cfg: &EvalConfig, results: &[CaseResult]) -> String {
 
 fn figures(cfg: &EvalConfig, results: &[CaseResult], out: &Path) -> Result<(), CliError> {
     let fig = |e: plot::PlotError| CliError::Output(format!("figure: {e}"));
-    for &v in &cfg.variants {
-        let v = variant_name(v);
+    for v in groups(cfg) {
         let series: Vec<Series> = cfg
             .methods
             .iter()
@@ -442,11 +551,50 @@ fn figures(cfg: &EvalConfig, results: &[CaseResult], out: &Path) -> Result<(), C
             })
             .collect();
         plot::error_distributions(
-            &out.join(format!("waypoint_errors_{v}")),
-            &format!("Waypoint error per method ({v} pairs)"),
+            &out.join(format!("waypoint_errors_{}_{}", v.0, v.1)),
+            &format!(
+                "Waypoint error per method ({} phantoms, {} pairs)",
+                v.0, v.1
+            ),
             "waypoint error (mm)",
             &series,
             Some((5.0, "clinical tolerance 5 mm")),
+        )
+        .map_err(fig)?;
+        // Where along the cartilage the first method's dense error sits.
+        let ours = cfg.methods[0].name();
+        let ok: Vec<&CaseResult> = rows(results, &ours, v)
+            .filter(|r| r.error.is_none())
+            .collect();
+        let mut along: Vec<Series> = (0..ALONG_BINS)
+            .map(|b| Series {
+                label: format!(
+                    "s {:.1}–{:.1}",
+                    b as f64 / ALONG_BINS as f64,
+                    (b + 1) as f64 / ALONG_BINS as f64
+                ),
+                values: ok
+                    .iter()
+                    .filter_map(|r| r.dense_along_cartilage.get(b).copied())
+                    .collect(),
+            })
+            .collect();
+        along.push(Series {
+            label: "sternum".into(),
+            values: ok
+                .iter()
+                .filter_map(|r| r.dense_by_structure.first().map(|s| s.mean))
+                .collect(),
+        });
+        plot::error_distributions(
+            &out.join(format!("dense_along_cartilage_{}_{}", v.0, v.1)),
+            &format!(
+                "{ours}: dense error along the cartilage, sternum (s 0) to tip (s 1), per pair ({}, {})",
+                v.0, v.1
+            ),
+            "mean dense error of the stretch (mm)",
+            &along,
+            Some((4.0, "goal for every waypoint 4 mm")),
         )
         .map_err(fig)?;
     }
@@ -477,4 +625,63 @@ fn figures(cfg: &EvalConfig, results: &[CaseResult], out: &Path) -> Result<(), C
         .filter_map(|&m| run_method(m, &pair).ok().map(|(_, w, _)| (m.name(), w)))
         .collect();
     write_figures(out, &tpl, &tgt, &outcome, &pair.true_waypoints, &mapped)
+}
+
+/// The first method's waypoint error by position and dense error by structure, one
+/// column per (preset, variant) group.
+fn breakdown(s: &mut String, cfg: &EvalConfig, results: &[CaseResult]) {
+    let ours = cfg.methods[0].name();
+    let groups = groups(cfg);
+    let head = groups
+        .iter()
+        .map(|g| format!("{}, {}", g.0, g.1))
+        .collect::<Vec<_>>()
+        .join(" | ");
+    let rule = "|---".repeat(groups.len() + 1) + "|";
+    let _ = writeln!(
+        s,
+        "### {ours}: waypoint error by position\n\nMean / max (mm) and the share beyond \
+         4 mm, both sides pooled.\n\n| waypoint | {head} |\n{rule}"
+    );
+    for class in 0..WAYPOINT_PLAN.len() {
+        let cells: Vec<String> = groups
+            .iter()
+            .map(|&g| {
+                let e: Vec<f64> = waypoint_errors(results, &ours, g)
+                    .iter()
+                    .filter(|w| w.1 % WAYPOINT_PLAN.len() == class)
+                    .map(|w| w.2)
+                    .collect();
+                let sum = Summary::of(&e);
+                let beyond = e.iter().filter(|&&x| x > 4.0).count();
+                format!(
+                    "{:.2} / {:.1}, {:.0} %",
+                    sum.mean,
+                    sum.max,
+                    100.0 * beyond as f64 / e.len().max(1) as f64
+                )
+            })
+            .collect();
+        let _ = writeln!(s, "| {} | {} |", waypoint_class(class), cells.join(" | "));
+    }
+    let _ = writeln!(
+        s,
+        "\n### {ours}: dense error by structure\n\nMean ± SD over pairs of each pair's mean, \
+         and the largest pair mean (mm).\n\n| structure | {head} |\n{rule}"
+    );
+    for (k, (name, _)) in STRUCTURES.iter().enumerate() {
+        let cells: Vec<String> = groups
+            .iter()
+            .map(|&g| {
+                let m: Vec<f64> = rows(results, &ours, g)
+                    .filter(|r| r.error.is_none())
+                    .filter_map(|r| r.dense_by_structure.get(k).map(|x| x.mean))
+                    .collect();
+                let sum = Summary::of(&m);
+                format!("{:.2} ± {:.2} (max {:.1})", sum.mean, sum.sd, sum.max)
+            })
+            .collect();
+        let _ = writeln!(s, "| {name} | {} |", cells.join(" | "));
+    }
+    let _ = writeln!(s);
 }

@@ -91,14 +91,16 @@ use ribreg_core::math::rng::Rng;
 use serde::{Deserialize, Serialize};
 
 pub mod ct;
+mod defects;
 mod geometry;
 mod mesh;
 mod params;
 mod pose;
 pub(crate) mod sampling;
 
+pub use defects::SweepDefects;
 pub use geometry::{surface_point, SubjectGeometry};
-pub use params::{Material, Part, Side, SubjectParams};
+pub use params::{Material, Part, Side, Spread, SubjectParams};
 pub use pose::Pose;
 
 use params::rib_index;
@@ -178,26 +180,8 @@ const MAX_DRAW_ATTEMPTS: usize = 64;
 pub const WAYPOINT_PLAN: [(u8, f64); 5] = [(2, 0.35), (2, 0.7), (3, 0.35), (3, 0.7), (4, 0.5)];
 
 /// Random subjects: a deviation is Gaussian with σ = range / `DRAW_CLIP_SIGMAS`, clipped to
-/// ±range (dimensionless).
+/// ±range (dimensionless). The ranges: [`Spread`].
 const DRAW_CLIP_SIGMAS: f64 = 2.0;
-/// Relative range of the anisotropic scale per axis (±10 %).
-const SCALE_REL: f64 = 0.10;
-/// Relative range of the chest radii (±15 %).
-const CHEST_RADIUS_REL: f64 = 0.15;
-/// Relative range of the sternum width (±10 %).
-const STERNUM_WIDTH_REL: f64 = 0.10;
-/// Relative range of the thickness factor shared by all cartilages and the sternum (±20 %).
-const THICKNESS_REL: f64 = 0.20;
-/// Relative range of each rib spacing at the sternum (±15 %).
-const SPACING_REL: f64 = 0.15;
-/// Relative range of each cartilage length (±15 %).
-const LENGTH_REL: f64 = 0.15;
-/// Absolute range of each cartilage slope, degrees.
-const SLOPE_ABS_DEG: f64 = 4.0;
-/// Relative range of each cartilage drop (±15 %).
-const DROP_REL: f64 = 0.15;
-/// Relative left/right asymmetry of lengths and of slopes/drops, per side and rib (±5 %).
-const ASYMMETRY_REL: f64 = 0.05;
 /// Number of standard-normal draws behind one random subject.
 const N_DRAWS: usize = 3 + 2 + 1 + 1 + 3 + RIB_COUNT * 3 + 2 * RIB_COUNT * 2;
 
@@ -209,6 +193,12 @@ const STREAM_TEMPLATE: u64 = 2;
 const STREAM_US: u64 = 3;
 /// Seed stream of the pose.
 const STREAM_POSE: u64 = 4;
+/// Seed stream of the hard preset's sternum ends (drawn from the patient's seed).
+const STREAM_STERNUM: u64 = 6;
+/// Range of the hard patients' manubrium: the sternum's top above the rib-2 attachment, mm.
+pub const HARD_MANUBRIUM_MM: (f64, f64) = (15.0, 35.0);
+/// Range of the hard patients' xiphoid: the sternum's bottom below the rib-5 attachment, mm.
+pub const HARD_XIPHOID_MM: (f64, f64) = (20.0, 60.0);
 
 // ---------------------------------------------------------------------------------------
 // Small vector helpers (plain f64 arrays)
@@ -312,6 +302,69 @@ pub enum Variant {
     Misaligned,
 }
 
+/// A family of phantoms: how much the patients vary and how imperfect their sweeps are.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Preset {
+    /// The phantoms of every figure before issue 12 (kept so that old and new results
+    /// compare): [`Spread::STANDARD`] patients, the template's sternum ends, holes
+    /// anywhere, every cartilage seen to its tip, no breathing.
+    #[default]
+    Standard,
+    /// Harder: [`Spread::HARD`] patients (lengths ±20 %, asymmetry ±12 %, slopes ±7°),
+    /// a manubrium 15–35 mm above rib 2 and a xiphoid 20–60 mm below rib 5, and the
+    /// [`SweepDefects`]: two more holes on lateral tips, each costochondral junction seen
+    /// only in part (from 80–95 % of a cartilage's length to its tip, 40 % of the points
+    /// seen),
+    /// breathing of 2–6 mm at
+    /// 0.2–0.3 Hz during a raster sweep.
+    Hard,
+}
+
+/// One difficulty of the [`Preset::Hard`] phantoms, which
+/// [`PhantomConfig::hard_without`] can leave out: an ablation of the phantom, to see what
+/// each costs a method.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum HardPart {
+    /// The wider patient variation ([`Spread::HARD`]; without: [`Spread::STANDARD`]).
+    Spread,
+    /// The manubrium and xiphoid (without: the template's sternum ends).
+    Sternum,
+    /// The holes on lateral tips.
+    TipHoles,
+    /// The partly seen costochondral junctions.
+    Junction,
+    /// Breathing during the sweep.
+    Breathing,
+}
+
+impl HardPart {
+    /// Name in tables and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            HardPart::Spread => "spread",
+            HardPart::Sternum => "sternum",
+            HardPart::TipHoles => "tip-holes",
+            HardPart::Junction => "junction",
+            HardPart::Breathing => "breathing",
+        }
+    }
+}
+
+impl Preset {
+    /// Both presets, standard first.
+    pub const ALL: [Preset; 2] = [Preset::Standard, Preset::Hard];
+
+    /// Name in tables, files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Preset::Standard => "standard",
+            Preset::Hard => "hard",
+        }
+    }
+}
+
 /// Phantom generation settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PhantomConfig {
@@ -329,6 +382,13 @@ pub struct PhantomConfig {
     pub variant: Variant,
     /// Seed of every random choice (default 0).
     pub seed: u64,
+    /// Which family of phantoms (default [`Preset::Standard`]).
+    #[serde(default)]
+    pub preset: Preset,
+    /// [`Preset::Hard`]: difficulties left out (default none; ignored for the standard
+    /// preset). With all five left out a hard phantom is the standard one.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub hard_without: Vec<HardPart>,
 }
 
 impl Default for PhantomConfig {
@@ -341,6 +401,8 @@ impl Default for PhantomConfig {
             missing_patches: 3,
             variant: Variant::Aligned,
             seed: 0,
+            preset: Preset::Standard,
+            hard_without: Vec::new(),
         }
     }
 }
@@ -412,13 +474,19 @@ pub struct PhantomPair {
     pub template_waypoints: Vec<[f64; 3]>,
     /// The same waypoints on the patient, target frame: the ground truth of waypoint mapping.
     pub true_waypoints: Vec<[f64; 3]>,
+    /// The sweep's defects ([`Preset::Hard`]; `None` for the standard phantoms).
+    pub defects: Option<SweepDefects>,
 }
 
 impl PhantomPair {
     /// The pair for `cfg`: template = [`SubjectParams::template`], patient =
-    /// [`SubjectParams::random`] with a seed derived from `cfg.seed`.
+    /// [`SubjectParams::random_for`] its preset with a seed derived from `cfg.seed`.
     pub fn generate(cfg: &PhantomConfig) -> PhantomPair {
-        let patient = SubjectParams::random(derive_seed(cfg.seed, STREAM_PATIENT));
+        let patient = SubjectParams::random_for(
+            derive_seed(cfg.seed, STREAM_PATIENT),
+            cfg.preset,
+            &cfg.hard_without,
+        );
         Self::generate_with(&SubjectParams::template(), &patient, cfg)
     }
 
@@ -460,6 +528,11 @@ impl PhantomPair {
             let radius = uniform(&mut rng, HOLE_RADIUS_RANGE_MM.0, HOLE_RADIUS_RANGE_MM.1);
             seen.retain(|(p, _)| dist2(*p, centre) > radius * radius);
         }
+        let defects = (cfg.preset == Preset::Hard).then(|| {
+            let (mut d, mut drng) = SweepDefects::draw(cfg.seed, &cfg.hard_without);
+            d.apply(&pg, &mut seen, &mut drng);
+            d
+        });
         let mut target: Vec<(P3, Option<Material>)> = seen
             .into_iter()
             .map(|(p, m)| {
@@ -507,6 +580,7 @@ impl PhantomPair {
             pose,
             template_waypoints,
             true_waypoints,
+            defects,
         }
     }
 
@@ -563,6 +637,7 @@ impl PhantomPair {
             },
             "template_waypoints": self.template_waypoints,
             "true_waypoints": self.true_waypoints,
+            "sweep_defects": self.defects,
         })
     }
 }

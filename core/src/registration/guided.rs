@@ -855,13 +855,19 @@ mod tests {
         // A loose fit is refused even without a competitor; NaN counts as no fit.
         let (_, c) = PoseConfidence::choose(&[Some((turned(0.0), 9.0))]).unwrap();
         assert_eq!(c.runner_up_mm, f32::INFINITY);
+        let e = c.check().unwrap_err();
         assert!(matches!(
-            c.check(),
-            Err(Error::Ambiguous {
+            e,
+            Error::Ambiguous {
                 residual_dmm: 90,
+                runner_up_dmm: u16::MAX,
                 ..
-            })
+            }
         ));
+        // The message says there was no competitor (it printed "6553.5 mm" before).
+        let text = e.to_string();
+        assert!(text.contains("no distinct one was found"), "{text}");
+        assert!(!text.contains("6553"), "{text}");
         let (_, c) = PoseConfidence::choose(&[Some((turned(0.0), f32::NAN))]).unwrap();
         assert!(c.check().is_err());
         assert!(PoseConfidence::choose(&[None, None]).is_none());

@@ -3,7 +3,7 @@
 use super::Context;
 use ribreg_sim::error::CliError;
 use ribreg_sim::eval::{self, EvalConfig, EvalMethod};
-use ribreg_sim::phantom::Variant;
+use ribreg_sim::phantom::{HardPart, Preset, Variant};
 use std::io::IsTerminal;
 use std::path::PathBuf;
 
@@ -15,6 +15,14 @@ pub struct Args {
     /// Which pose variants.
     #[arg(long, value_enum, default_value_t = Variants::Both)]
     variants: Variants,
+    /// Which phantom families: `standard` (every figure before the hard phantoms),
+    /// `hard`, or `both` (each gets its own tables).
+    #[arg(long, value_enum, default_value_t = Presets::Standard)]
+    preset: Presets,
+    /// With the hard preset: difficulties to leave out, comma-separated (an ablation of
+    /// the phantom: what each costs).
+    #[arg(long, value_enum, value_delimiter = ',')]
+    hard_without: Vec<HardPart>,
     /// Worker threads (default: all cores).
     #[arg(long)]
     jobs: Option<usize>,
@@ -29,6 +37,14 @@ pub struct Args {
     /// Output folder (created if missing).
     #[arg(long, default_value = "out/eval")]
     out_dir: PathBuf,
+}
+
+/// Which phantom presets `eval` runs.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum Presets {
+    Standard,
+    Hard,
+    Both,
 }
 
 /// Which pose variants `eval` runs.
@@ -52,8 +68,15 @@ pub fn run(args: &Args, ctx: &Context) -> Result<(), CliError> {
     let jobs = args
         .jobs
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let presets = match args.preset {
+        Presets::Standard => vec![Preset::Standard],
+        Presets::Hard => vec![Preset::Hard],
+        Presets::Both => Preset::ALL.to_vec(),
+    };
     let cfg = EvalConfig {
         pairs: args.pairs,
+        presets,
+        hard_without: args.hard_without.clone(),
         variants,
         methods,
         jobs,

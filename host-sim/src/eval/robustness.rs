@@ -211,8 +211,9 @@ pub fn run_robustness(
         Case::all().len(),
         cfg.methods.len()
     );
-    let mut results = parallel(&cases, cfg.jobs, &what, progress, |&(variant, seed)| {
-        let pair = phantom(variant, seed);
+    let mut results = parallel(&cases, cfg.jobs, &what, progress, |id| {
+        let pair = phantom(cfg, id);
+        let (_, variant, seed) = *id;
         let mut rows = vec![];
         for case in Case::all() {
             let moved = case.apply(&pair, seed);
@@ -234,6 +235,7 @@ pub fn run_robustness(
     results.sort_by_cached_key(|r| {
         let case = names.iter().position(|n| *n == r.case);
         (
+            r.result.preset.clone(),
             case,
             r.result.variant.clone(),
             r.result.seed,
@@ -303,38 +305,45 @@ fn markdown(cfg: &EvalConfig, results: &[RobustResult]) -> String {
         cfg.pairs,
         variants.join(" and ")
     );
-    let _ = writeln!(
-        s,
-        "| case | method | runs | accepted | refused | silent failures | worst accepted |"
-    );
-    let _ = writeln!(s, "|---|---|---|---|---|---|---|");
     let methods: Vec<String> = cfg.methods.iter().map(|m| m.name()).collect();
-    for case in Case::all() {
-        let name = case.name();
-        for m in &methods {
-            let c = Counts::of(
-                results
-                    .iter()
-                    .filter(|r| r.case == name && &r.result.method == m),
-            );
-            let _ = writeln!(s, "{}", c.row(&name, m));
+    for preset in &cfg.presets {
+        let of = |r: &&RobustResult| r.result.preset == preset.name();
+        let _ = writeln!(s, "### {} phantoms\n", preset.name());
+        let _ = writeln!(
+            s,
+            "| case | method | runs | accepted | refused | silent failures | worst accepted |"
+        );
+        let _ = writeln!(s, "|---|---|---|---|---|---|---|");
+        for case in Case::all() {
+            let name = case.name();
+            for m in &methods {
+                let c = Counts::of(
+                    results
+                        .iter()
+                        .filter(of)
+                        .filter(|r| r.case == name && &r.result.method == m),
+                );
+                let _ = writeln!(s, "{}", c.row(&name, m));
+            }
         }
-    }
-    let _ = writeln!(s, "\nIn all:\n");
-    let _ = writeln!(
-        s,
-        "| coverage | method | runs | accepted | refused | silent failures | worst accepted |"
-    );
-    let _ = writeln!(s, "|---|---|---|---|---|---|---|");
-    for (label, complete) in [("complete", true), ("incomplete", false)] {
-        for m in &methods {
-            let c = Counts::of(
-                results
-                    .iter()
-                    .filter(|r| r.complete == complete && &r.result.method == m),
-            );
-            let _ = writeln!(s, "{}", c.row(label, m));
+        let _ = writeln!(s, "\nIn all ({} phantoms):\n", preset.name());
+        let _ = writeln!(
+            s,
+            "| coverage | method | runs | accepted | refused | silent failures | worst accepted |"
+        );
+        let _ = writeln!(s, "|---|---|---|---|---|---|---|");
+        for (label, complete) in [("complete", true), ("incomplete", false)] {
+            for m in &methods {
+                let c = Counts::of(
+                    results
+                        .iter()
+                        .filter(of)
+                        .filter(|r| r.complete == complete && &r.result.method == m),
+                );
+                let _ = writeln!(s, "{}", c.row(label, m));
+            }
         }
+        let _ = writeln!(s);
     }
     s
 }
@@ -414,13 +423,8 @@ mod tests {
         let mut r = CaseResult {
             method: "m".into(),
             variant: "aligned".into(),
-            seed: 0,
-            error: None,
-            ed: Default::default(),
-            hd: 0.0,
-            dense: Default::default(),
             waypoint_errors: vec![1.0, 10.5],
-            runtime_ms: 0.0,
+            ..CaseResult::default()
         };
         assert_eq!(outcome(&r).0, "silent failure");
         r.waypoint_errors = vec![1.0, f64::NAN];

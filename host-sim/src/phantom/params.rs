@@ -174,28 +174,63 @@ impl SubjectParams {
         }
     }
 
-    /// A plausible random patient, deterministic in `seed`: anisotropic scale ±10 %, chest
-    /// radii ±15 %, sternum width ±10 %, one thickness factor ±20 % (cartilages and sternum),
-    /// rib spacings ±15 %, lengths ±15 %, slopes ±4°, drops ±15 %, and a left/right
-    /// asymmetry of ±5 % per side and rib on lengths and on slopes/drops. Each deviation is a
-    /// Gaussian with σ = half its range, clipped to the range.
+    /// A plausible random patient of the [`Preset::Standard`] phantoms, deterministic in
+    /// `seed`: anisotropic scale ±10 %, chest radii ±15 %, sternum width ±10 %, one
+    /// thickness factor ±20 % (cartilages and sternum), rib spacings ±15 %, lengths ±15 %,
+    /// slopes ±4°, drops ±15 %, and a left/right asymmetry of ±5 % per side and rib on
+    /// lengths and on slopes/drops. Each deviation is a Gaussian with σ = half its range,
+    /// clipped to the range.
     ///
     /// Draws whose neighbouring cartilages could come closer than [`MIN_CARTILAGE_GAP_MM`]
     /// are rejected; after 64 rejections the last draw is shrunk toward
     /// the template (which satisfies the gap) until it passes.
     pub fn random(seed: u64) -> Self {
+        Self::random_with(seed, &Spread::STANDARD)
+    }
+
+    /// A random patient of `preset` (see [`Preset`]): [`SubjectParams::random`] for the
+    /// standard phantoms; for the hard ones the wider [`Spread::HARD`] and a manubrium
+    /// [`HARD_MANUBRIUM_MM`] above rib 2 and a xiphoid [`HARD_XIPHOID_MM`] below rib 5
+    /// (uniform, from a stream of their own, so the rest of the draw is the standard
+    /// one's shape); `without` leaves out [`HardPart::Spread`] (the standard spread)
+    /// or [`HardPart::Sternum`] (the template's sternum ends).
+    pub fn random_for(seed: u64, preset: Preset, without: &[HardPart]) -> Self {
+        match preset {
+            Preset::Standard => Self::random(seed),
+            Preset::Hard => {
+                let spread = if without.contains(&HardPart::Spread) {
+                    &Spread::STANDARD
+                } else {
+                    &Spread::HARD
+                };
+                let mut p = Self::random_with(seed, spread);
+                if without.contains(&HardPart::Sternum) {
+                    return p;
+                }
+                let mut rng = Rng::new(derive_seed(seed, STREAM_STERNUM));
+                p.sternum_margin_mm = [
+                    uniform(&mut rng, HARD_MANUBRIUM_MM.0, HARD_MANUBRIUM_MM.1),
+                    uniform(&mut rng, HARD_XIPHOID_MM.0, HARD_XIPHOID_MM.1),
+                ];
+                p
+            }
+        }
+    }
+
+    /// [`SubjectParams::random`] with the deviations of `spread`.
+    fn random_with(seed: u64, spread: &Spread) -> Self {
         let mut rng = Rng::new(seed);
         let mut z = [0.0; N_DRAWS];
         for _ in 0..MAX_DRAW_ATTEMPTS {
             z.iter_mut().for_each(|v| *v = gaussian(&mut rng));
-            let p = Self::from_draws(&z, 1.0);
+            let p = Self::from_draws(&z, 1.0, spread);
             if p.gap_is_safe() {
                 return p;
             }
         }
         let mut t = 0.5;
         while t > 1e-3 {
-            let p = Self::from_draws(&z, t);
+            let p = Self::from_draws(&z, t, spread);
             if p.gap_is_safe() {
                 return p;
             }
@@ -204,9 +239,9 @@ impl SubjectParams {
         Self::template()
     }
 
-    /// The subject for standard-normal draws `z`, each deviation multiplied by `t`
-    /// (t = 0 gives the template exactly).
-    pub(super) fn from_draws(z: &[f64; N_DRAWS], t: f64) -> Self {
+    /// The subject for standard-normal draws `z`, each deviation (ranges of `spread`)
+    /// multiplied by `t` (t = 0 gives the template exactly).
+    pub(super) fn from_draws(z: &[f64; N_DRAWS], t: f64, spread: &Spread) -> Self {
         let mut k = 0usize;
         let mut next = || {
             let v = z.get(k).copied().unwrap_or(0.0);
@@ -216,12 +251,12 @@ impl SubjectParams {
         let mut p = Self::template();
         p.scale
             .iter_mut()
-            .for_each(|v| *v *= 1.0 + SCALE_REL * next());
+            .for_each(|v| *v *= 1.0 + spread.scale * next());
         p.chest_radius_mm
             .iter_mut()
-            .for_each(|v| *v *= 1.0 + CHEST_RADIUS_REL * next());
-        p.sternum_width_mm *= 1.0 + STERNUM_WIDTH_REL * next();
-        let thickness = 1.0 + THICKNESS_REL * next();
+            .for_each(|v| *v *= 1.0 + spread.chest_radius * next());
+        p.sternum_width_mm *= 1.0 + spread.sternum_width * next();
+        let thickness = 1.0 + spread.thickness * next();
         p.sternum_thickness_mm *= thickness;
         p.cartilage_width_mm
             .iter_mut()
@@ -231,11 +266,11 @@ impl SubjectParams {
             .for_each(|v| *v *= thickness);
         p.rib_spacing_mm
             .iter_mut()
-            .for_each(|v| *v *= 1.0 + SPACING_REL * next());
+            .for_each(|v| *v *= 1.0 + spread.spacing * next());
         for r in 0..RIB_COUNT {
-            let length = 1.0 + LENGTH_REL * next();
-            let slope = SLOPE_ABS_DEG * next();
-            let drop = 1.0 + DROP_REL * next();
+            let length = 1.0 + spread.length * next();
+            let slope = spread.slope_deg * next();
+            let drop = 1.0 + spread.drop * next();
             for side in 0..2 {
                 p.cartilage_length_mm[side][r] *= length;
                 p.cartilage_slope_deg[side][r] += slope;
@@ -244,8 +279,8 @@ impl SubjectParams {
         }
         for side in 0..2 {
             for r in 0..RIB_COUNT {
-                p.cartilage_length_mm[side][r] *= 1.0 + ASYMMETRY_REL * next();
-                let a = 1.0 + ASYMMETRY_REL * next();
+                p.cartilage_length_mm[side][r] *= 1.0 + spread.asymmetry * next();
+                let a = 1.0 + spread.asymmetry * next();
                 p.cartilage_slope_deg[side][r] *= a;
                 p.cartilage_drop_mm[side][r] *= a;
             }
@@ -308,4 +343,52 @@ impl SubjectParams {
         SubjectGeometry::new(self).min_gap_lower_bound()
             >= MIN_CARTILAGE_GAP_MM + GAP_SAFETY_MARGIN_MM
     }
+}
+
+/// How far a random patient may deviate from the template: each is the range (±) of one
+/// Gaussian deviation (σ = half the range, clipped to it); relative unless named `_deg`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Spread {
+    /// Anisotropic scale, per axis.
+    pub scale: f64,
+    /// Chest radii.
+    pub chest_radius: f64,
+    /// Sternum width.
+    pub sternum_width: f64,
+    /// The thickness factor shared by all cartilages and the sternum.
+    pub thickness: f64,
+    /// Each rib spacing at the sternum.
+    pub spacing: f64,
+    /// Each cartilage length (both sides).
+    pub length: f64,
+    /// Each cartilage slope (both sides), degrees.
+    pub slope_deg: f64,
+    /// Each cartilage drop (both sides).
+    pub drop: f64,
+    /// Left/right asymmetry of lengths and of slopes/drops, per side and rib.
+    pub asymmetry: f64,
+}
+
+impl Spread {
+    /// The standard phantoms' patients (every figure before issue 12's harder phantoms).
+    pub const STANDARD: Spread = Spread {
+        scale: 0.10,
+        chest_radius: 0.15,
+        sternum_width: 0.10,
+        thickness: 0.20,
+        spacing: 0.15,
+        length: 0.15,
+        slope_deg: 4.0,
+        drop: 0.15,
+        asymmetry: 0.05,
+    };
+    /// The hard phantoms' patients: cartilage lengths ±20 %, slopes ±7°, drops ±30 % and
+    /// a left/right asymmetry of ±12 %; the rest as [`Spread::STANDARD`].
+    pub const HARD: Spread = Spread {
+        length: 0.20,
+        slope_deg: 7.0,
+        drop: 0.30,
+        asymmetry: 0.12,
+        ..Spread::STANDARD
+    };
 }

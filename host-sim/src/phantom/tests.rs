@@ -304,7 +304,10 @@ fn phantom_template_rib_spacing_at_sternum() {
 #[test]
 fn phantom_random_subjects_are_plausible() {
     let t = SubjectParams::template();
-    assert_eq!(SubjectParams::from_draws(&[1.5; N_DRAWS], 0.0), t);
+    assert_eq!(
+        SubjectParams::from_draws(&[1.5; N_DRAWS], 0.0, &Spread::STANDARD),
+        t
+    );
     assert_eq!(SubjectParams::random(5), SubjectParams::random(5));
     assert_ne!(SubjectParams::random(5), SubjectParams::random(6));
     for seed in 0..100u64 {
@@ -438,4 +441,152 @@ fn phantom_gaussian_moments() {
     let mean = xs.iter().sum::<f64>() / n as f64;
     let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n as f64;
     assert!(mean.abs() < 0.03 && (var - 1.0).abs() < 0.05);
+}
+
+use super::defects::{BREATHING_EXCURSION_MM, BREATHING_HZ, JUNCTION_SEEN_FRACTION, TIP_HOLES};
+
+/// A coarse hard phantom, some difficulties left out.
+fn hard(seed: u64, without: &[HardPart]) -> PhantomPair {
+    PhantomPair::generate(&PhantomConfig {
+        preset: Preset::Hard,
+        hard_without: without.to_vec(),
+        ..coarse(seed, Variant::Aligned)
+    })
+}
+
+#[test]
+fn hard_without_every_difficulty_is_the_standard_phantom() {
+    let all = [
+        HardPart::Spread,
+        HardPart::Sternum,
+        HardPart::TipHoles,
+        HardPart::Junction,
+        HardPart::Breathing,
+    ];
+    for seed in 0..3 {
+        let h = hard(seed, &all);
+        let s = PhantomPair::generate(&coarse(seed, Variant::Aligned));
+        assert_eq!(h.patient_params, s.patient_params);
+        assert_eq!(h.target, s.target);
+        assert_eq!(h.true_waypoints, s.true_waypoints);
+        assert_eq!(h.template, s.template);
+        assert!(s.defects.is_none() && h.defects.is_some());
+    }
+}
+
+#[test]
+fn hard_patients_have_a_manubrium_and_xiphoid_in_range_and_vary_more() {
+    let mut spread = [0.0f64; 2];
+    for seed in 0..40u64 {
+        let p = SubjectParams::random_for(seed, Preset::Hard, &[]);
+        let [top, bottom] = p.sternum_margin_mm;
+        assert!(
+            (HARD_MANUBRIUM_MM.0..=HARD_MANUBRIUM_MM.1).contains(&top),
+            "{top}"
+        );
+        assert!(
+            (HARD_XIPHOID_MM.0..=HARD_XIPHOID_MM.1).contains(&bottom),
+            "{bottom}"
+        );
+        assert!(p.gap_is_safe());
+        let s = SubjectParams::random_for(seed, Preset::Standard, &[]);
+        assert_eq!(s, SubjectParams::random(seed));
+        let t = SubjectParams::template();
+        for (k, q) in [s, p].iter().enumerate() {
+            for side in 0..2 {
+                for r in 0..RIB_COUNT {
+                    let rel = q.cartilage_length_mm[side][r] / t.cartilage_length_mm[side][r];
+                    spread[k] = spread[k].max((rel - 1.0).abs());
+                }
+            }
+        }
+    }
+    // Length ±15 % and asymmetry ±5 % (standard) against ±20 % and ±12 % (hard).
+    assert!(spread[0] <= 1.15 * 1.05 - 1.0 + 1e-9, "{spread:?}");
+    assert!(
+        spread[1] > spread[0] && spread[1] <= 1.2 * 1.12 - 1.0 + 1e-9,
+        "{spread:?}"
+    );
+}
+
+#[test]
+fn hard_sweeps_lose_tips_and_junction_points_and_breathe() {
+    let full = hard(
+        4,
+        &[HardPart::TipHoles, HardPart::Junction, HardPart::Breathing],
+    );
+    let pair = hard(4, &[]);
+    let d = pair
+        .defects
+        .clone()
+        .expect("hard phantoms record their defects");
+    assert_eq!(d.tip_holes.len(), TIP_HOLES);
+    assert!(pair.target.len() < full.target.len());
+    // No seen point lies inside a tip hole (noise aside: 3 SD of 0.7 mm).
+    let pg = SubjectGeometry::new(&pair.patient_params);
+    for &(part, s, radius) in &d.tip_holes {
+        let centre = pg.position(&Material {
+            part,
+            s,
+            phi: std::f64::consts::FRAC_PI_2,
+        });
+        for m in pair.target_material.iter().flatten() {
+            assert!(dist2(pg.position(m), centre).sqrt() > radius - 1e-9);
+        }
+    }
+    // Junction zones keep about JUNCTION_SEEN_FRACTION of their points.
+    let in_zone = |p: &PhantomPair| {
+        p.target_material
+            .iter()
+            .flatten()
+            .filter(|m| match m.part {
+                Part::Cartilage { rib, side } => {
+                    m.s > d.junction_from_s[side.index()][rib_index(rib)]
+                        && !d.tip_holes.iter().any(|h| h.0 == m.part)
+                }
+                Part::Sternum => false,
+            })
+            .count() as f64
+    };
+    let kept = in_zone(&pair) / in_zone(&full);
+    assert!((kept - JUNCTION_SEEN_FRACTION).abs() < 0.15, "{kept}");
+    // Breathing: in range, and zero-mean over the sweep, so the truth is unchanged.
+    assert!(
+        (BREATHING_EXCURSION_MM.0..=BREATHING_EXCURSION_MM.1).contains(&d.breathing_excursion_mm)
+    );
+    assert!((BREATHING_HZ.0..=BREATHING_HZ.1).contains(&d.breathing_hz));
+    assert!(d.sweep_duration_s > 60.0, "{}", d.sweep_duration_s);
+    let still = hard(4, &[HardPart::Breathing]);
+    assert_eq!(still.true_waypoints, pair.true_waypoints);
+    // Outliers are drawn in the moved cloud's box: compare the surface points only.
+    let shift: Vec<f64> = still
+        .target
+        .iter()
+        .zip(&pair.target)
+        .zip(&pair.target_material)
+        .filter(|(_, m)| m.is_some())
+        .map(|((a, b), _)| norm(sub(*b, *a)))
+        .collect();
+    let worst = shift.iter().copied().fold(0.0, f64::max);
+    assert!(
+        worst <= 0.5 * d.breathing_excursion_mm + 1e-6 && worst > 0.0,
+        "{worst}"
+    );
+}
+
+#[test]
+fn hard_part_names_are_the_command_line_names() {
+    use clap::ValueEnum;
+    for p in HardPart::value_variants() {
+        let v = p
+            .to_possible_value()
+            .expect("every part is on the command line");
+        assert_eq!(v.get_name(), p.name());
+    }
+    for p in Preset::value_variants() {
+        let v = p
+            .to_possible_value()
+            .expect("every preset is on the command line");
+        assert_eq!(v.get_name(), p.name());
+    }
 }
