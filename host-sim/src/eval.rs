@@ -685,3 +685,50 @@ fn breakdown(s: &mut String, cfg: &EvalConfig, results: &[CaseResult]) {
     }
     let _ = writeln!(s);
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn waypoint_classes_follow_the_plan_on_both_sides() {
+        assert_eq!(waypoint_class(0), "gap 2–3, medial (s 0.35)");
+        assert_eq!(waypoint_class(1), "gap 2–3, lateral (s 0.7)");
+        assert_eq!(waypoint_class(4), "gap 4–5, middle (s 0.5)");
+        // The right side's waypoints follow the left's in the same order.
+        for i in 0..WAYPOINT_PLAN.len() {
+            assert_eq!(waypoint_class(i), waypoint_class(i + WAYPOINT_PLAN.len()));
+        }
+    }
+
+    /// Each template point's error lands in its structure and its stretch of cartilage:
+    /// an error equal to the point's label, or to its stretch, comes back as the means.
+    #[test]
+    fn dense_breakdown_sorts_points_by_structure_and_by_position_along_the_cartilage() {
+        let pair = PhantomPair::generate(&PhantomConfig {
+            spacing_mm: 5.0,
+            us_spacing_mm: 5.0,
+            ..PhantomConfig::default()
+        });
+        let by_label: Vec<f64> = pair.template.labels.iter().map(|&l| f64::from(l)).collect();
+        let (structures, _) = dense_breakdown(&pair, &by_label);
+        for (s, (_, label)) in structures.iter().zip(STRUCTURES) {
+            assert!(s.n > 0);
+            assert_eq!((s.mean, s.max), (f64::from(label), f64::from(label)));
+        }
+        let n: usize = structures.iter().map(|s| s.n).sum();
+        assert_eq!(n, pair.template.points.len());
+        let by_stretch: Vec<f64> = pair
+            .template
+            .material
+            .iter()
+            .map(|m| {
+                (m.s * ALONG_BINS as f64)
+                    .floor()
+                    .min(ALONG_BINS as f64 - 1.0)
+            })
+            .collect();
+        let (_, along) = dense_breakdown(&pair, &by_stretch);
+        assert_eq!(along, (0..ALONG_BINS).map(|b| b as f64).collect::<Vec<_>>());
+    }
+}

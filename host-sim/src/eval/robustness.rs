@@ -292,6 +292,27 @@ impl Counts {
     }
 }
 
+/// A markdown table of [`Counts`]: one row per (group, method), the group's name in the
+/// column headed `first`.
+fn counts_table(
+    s: &mut String,
+    first: &str,
+    methods: &[String],
+    groups: Vec<(String, Vec<&RobustResult>)>,
+) {
+    let _ = writeln!(
+        s,
+        "| {first} | method | runs | accepted | refused | silent failures | worst accepted |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|");
+    for (label, rows) in groups {
+        for m in methods {
+            let c = Counts::of(rows.iter().copied().filter(|r| &r.result.method == m));
+            let _ = writeln!(s, "{}", c.row(&label, m));
+        }
+    }
+}
+
 fn markdown(cfg: &EvalConfig, results: &[RobustResult]) -> String {
     let mut s = String::new();
     let variants: Vec<&str> = cfg.variants.iter().map(|&v| variant_name(v)).collect();
@@ -309,40 +330,29 @@ fn markdown(cfg: &EvalConfig, results: &[RobustResult]) -> String {
     for preset in &cfg.presets {
         let of = |r: &&RobustResult| r.result.preset == preset.name();
         let _ = writeln!(s, "### {} phantoms\n", preset.name());
-        let _ = writeln!(
-            s,
-            "| case | method | runs | accepted | refused | silent failures | worst accepted |"
-        );
-        let _ = writeln!(s, "|---|---|---|---|---|---|---|");
-        for case in Case::all() {
-            let name = case.name();
-            for m in &methods {
-                let c = Counts::of(
-                    results
-                        .iter()
-                        .filter(of)
-                        .filter(|r| r.case == name && &r.result.method == m),
-                );
-                let _ = writeln!(s, "{}", c.row(&name, m));
-            }
-        }
+        let mine: Vec<&RobustResult> = results.iter().filter(of).collect();
+        let by_case = Case::all()
+            .into_iter()
+            .map(|c| {
+                let name = c.name();
+                let rows = mine.iter().copied().filter(|r| r.case == name).collect();
+                (name, rows)
+            })
+            .collect();
+        counts_table(&mut s, "case", &methods, by_case);
         let _ = writeln!(s, "\nIn all ({} phantoms):\n", preset.name());
-        let _ = writeln!(
-            s,
-            "| coverage | method | runs | accepted | refused | silent failures | worst accepted |"
-        );
-        let _ = writeln!(s, "|---|---|---|---|---|---|---|");
-        for (label, complete) in [("complete", true), ("incomplete", false)] {
-            for m in &methods {
-                let c = Counts::of(
-                    results
-                        .iter()
-                        .filter(of)
-                        .filter(|r| r.complete == complete && &r.result.method == m),
-                );
-                let _ = writeln!(s, "{}", c.row(label, m));
-            }
-        }
+        let by_coverage = [("complete", true), ("incomplete", false)]
+            .into_iter()
+            .map(|(label, complete)| {
+                let rows = mine
+                    .iter()
+                    .copied()
+                    .filter(|r| r.complete == complete)
+                    .collect();
+                (label.to_string(), rows)
+            })
+            .collect();
+        counts_table(&mut s, "coverage", &methods, by_coverage);
         let _ = writeln!(s);
     }
     s
