@@ -340,6 +340,9 @@ pub enum HardPart {
 }
 
 impl HardPart {
+    /// The difficulties of the sweep, not of the patient.
+    pub const SWEEP: [HardPart; 3] = [HardPart::TipHoles, HardPart::Junction, HardPart::Breathing];
+
     /// Name in tables and on the command line.
     pub fn name(self) -> &'static str {
         match self {

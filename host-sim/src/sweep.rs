@@ -36,7 +36,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::CliError;
 use crate::io::{self, Cloud, IoError, PlyFormat};
-use crate::phantom::{PhantomConfig, PhantomPair, Pose, SubjectGeometry, MESH_EDGE_MM};
+use crate::phantom::{HardPart, PhantomConfig, PhantomPair, Pose, SubjectGeometry, MESH_EDGE_MM};
 
 pub mod plus;
 pub(crate) mod sim;
@@ -522,13 +522,18 @@ const STREAM_SWEEP: u64 = 0x5EE9;
 const STREAM_CALIBRATION: u64 = 0xCA1B;
 
 /// Simulates the sweep of the phantom of `phantom` (its US target is generated noise-free,
-/// without holes or outliers: the ideal cloud the compounded one is compared with).
+/// without holes or outliers: the ideal cloud the compounded one is compared with). A
+/// hard phantom keeps its patient's shape; the simulated sweep stands in for its sweep
+/// defects ([`HardPart::SWEEP`]), which the ideal cloud leaves out.
 pub fn simulate(phantom: &PhantomConfig, cfg: &SweepConfig) -> Result<SweepLogs, CliError> {
     cfg.validate()?;
+    let mut hard_without = phantom.hard_without.clone();
+    hard_without.extend(HardPart::SWEEP);
     let ideal = PhantomConfig {
         us_noise_mm: 0.0,
         outlier_fraction: 0.0,
         missing_patches: 0,
+        hard_without,
         ..phantom.clone()
     };
     let pair = PhantomPair::generate(&ideal);
