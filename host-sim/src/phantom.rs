@@ -315,9 +315,7 @@ pub enum Preset {
     /// a manubrium 15–35 mm above rib 2 and a xiphoid 20–60 mm below rib 5, and the
     /// [`SweepDefects`]: two more holes on lateral tips, each costochondral junction seen
     /// only in part (from 80–95 % of a cartilage's length to its tip, 40 % of the points
-    /// seen),
-    /// breathing of 2–6 mm at
-    /// 0.2–0.3 Hz during a raster sweep.
+    /// seen), breathing of 2–6 mm at 0.2–0.3 Hz during a raster sweep.
     Hard,
 }
 

@@ -17,7 +17,7 @@
 //! `−(A/2)·cos(2π f t + φ)` (peak-to-peak excursion `A`): zero-mean, so the ground truth
 //! (the patient at rest) is the mean breathing position, which is all a registration of
 //! the whole sweep can recover. The paper's 106 s sweep was taken under natural
-//! breathing; a 300 mm wide chest at these settings takes 100–150 s.
+//! breathing; the hard phantoms' sweeps at these settings take 100–160 s.
 
 use std::f64::consts::FRAC_PI_2;
 
