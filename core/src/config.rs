@@ -40,6 +40,10 @@ pub struct Config {
     /// more than [`crate::registration::endpoints::PRIOR_CONE_DEG`] from it are not
     /// considered. `None`: no prior, any pose.
     pub target_up: Option<crate::Vec3>,
+    /// Guided model: lengthen a rib side the target shows shorter, against the
+    /// template, than every other rib side
+    /// ([`crate::registration::guided::lengthen_short`]). The paper has no such step.
+    pub lengthen_short_ribs: bool,
 }
 
 impl Default for Config {
@@ -51,6 +55,7 @@ impl Default for Config {
             neighbours: NEIGHBOURS,
             rib_model: RibModel::Graph,
             target_up: None,
+            lengthen_short_ribs: false,
         }
     }
 }
@@ -62,6 +67,7 @@ impl Config {
     pub fn improved() -> Self {
         Config {
             rib_model: RibModel::Guided,
+            lengthen_short_ribs: true,
             ..Config::default()
         }
     }

@@ -13,7 +13,7 @@ use crate::phantom::{
     HardPart, Part, PhantomConfig, PhantomPair, Preset, Variant, STERNUM_LABEL, WAYPOINT_PLAN,
 };
 use crate::plot::{self, Series};
-use crate::register::{register_clouds, to_core, to_file, Method};
+use crate::register::{register_clouds, to_core, to_file, Ablation, Method, Options};
 use crate::stats::{paired_t_test, Summary};
 use ribreg_core::error::Cloud as Which;
 use ribreg_core::registration::metrics::compare;
@@ -30,6 +30,8 @@ use std::time::Instant;
 pub enum EvalMethod {
     /// Ours, paper or improved, with the template's labels or without.
     Ours(Method, bool),
+    /// Ours (improved) with one step left out (`eval --ablation`).
+    Without(Ablation),
     /// A baseline.
     Baseline(baselines::Method),
 }
@@ -55,6 +57,7 @@ impl EvalMethod {
         match self {
             EvalMethod::Ours(m, true) => format!("ours ({})", m.name()),
             EvalMethod::Ours(m, false) => format!("ours ({}, unlabelled)", m.name()),
+            EvalMethod::Without(a) => format!("ours (improved), no {}", a.name()),
             EvalMethod::Baseline(m) => m.name().to_string(),
         }
     }
@@ -145,29 +148,17 @@ type Mapped = (Vec<[f64; 3]>, Vec<[f64; 3]>, f64);
 
 /// Runs one method on one pair; `Err` carries the method's own error message.
 fn run_method(m: EvalMethod, pair: &PhantomPair) -> Result<Mapped, String> {
-    let t0 = Instant::now();
     match m {
-        EvalMethod::Ours(method, labelled) => {
-            let tpl = to_core(&pair.template.points, Which::Template).map_err(|e| e.to_string())?;
-            let tgt = to_core(&pair.target, Which::Target).map_err(|e| e.to_string())?;
-            let wps = to_core(&pair.template_waypoints, Which::Query).map_err(|e| e.to_string())?;
-            let labels: Vec<u8> = pair
-                .template
-                .labels
-                .iter()
-                .map(|&l| u8::try_from(l).unwrap_or(0))
-                .collect();
-            let labels = labelled.then_some(labels.as_slice());
-            let o = register_clouds(&tpl, labels, &tgt, Some(&wps), method, &mut |_| ())
-                .map_err(|e| e.to_string())?;
-            let ms = t0.elapsed().as_secs_f64() * 1e3;
-            Ok((
-                to_file(&o.registered),
-                to_file(&o.waypoints.unwrap_or_default()),
-                ms,
-            ))
+        EvalMethod::Ours(method, labelled) => run_ours(pair, method.into(), labelled),
+        EvalMethod::Without(a) => {
+            let how = Options {
+                without: Some(a),
+                ..Method::Improved.into()
+            };
+            run_ours(pair, how, true)
         }
         EvalMethod::Baseline(b) => {
+            let t0 = Instant::now();
             let map = baselines::run(b, &pair.template.points, &pair.target)
                 .map_err(|e| e.to_string())?;
             let dense = map.map_all(&pair.template.points);
@@ -175,6 +166,29 @@ fn run_method(m: EvalMethod, pair: &PhantomPair) -> Result<Mapped, String> {
             Ok((dense, wps, t0.elapsed().as_secs_f64() * 1e3))
         }
     }
+}
+
+/// Ours on one pair, `how`, with the template's labels or without.
+fn run_ours(pair: &PhantomPair, how: Options, labelled: bool) -> Result<Mapped, String> {
+    let t0 = Instant::now();
+    let tpl = to_core(&pair.template.points, Which::Template).map_err(|e| e.to_string())?;
+    let tgt = to_core(&pair.target, Which::Target).map_err(|e| e.to_string())?;
+    let wps = to_core(&pair.template_waypoints, Which::Query).map_err(|e| e.to_string())?;
+    let labels: Vec<u8> = pair
+        .template
+        .labels
+        .iter()
+        .map(|&l| u8::try_from(l).unwrap_or(0))
+        .collect();
+    let labels = labelled.then_some(labels.as_slice());
+    let o = register_clouds(&tpl, labels, &tgt, Some(&wps), how, &mut |_| ())
+        .map_err(|e| e.to_string())?;
+    let ms = t0.elapsed().as_secs_f64() * 1e3;
+    Ok((
+        to_file(&o.registered),
+        to_file(&o.waypoints.unwrap_or_default()),
+        ms,
+    ))
 }
 
 fn evaluate(m: EvalMethod, pair: &PhantomPair, variant: Variant, seed: u64) -> CaseResult {

@@ -51,6 +51,34 @@ impl Method {
     }
 }
 
+/// A step of the improved method that an ablation row of `ribreg eval --ablation` leaves
+/// out, to measure what it brings (the README's ablation table).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Ablation {
+    /// Lengthening a rib side the target shows shorter than every other
+    /// (`Config::lengthen_short_ribs`): the rib extents as observed.
+    LengthenShortRibs,
+}
+
+impl Ablation {
+    /// Every step an ablation row can leave out.
+    pub const ALL: [Ablation; 1] = [Ablation::LengthenShortRibs];
+
+    /// What is left out, in a table row's name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Ablation::LengthenShortRibs => "short ribs lengthened",
+        }
+    }
+
+    /// `cfg` without the step.
+    fn remove(self, cfg: &mut Config) {
+        match self {
+            Ablation::LengthenShortRibs => cfg.lengthen_short_ribs = false,
+        }
+    }
+}
+
 /// How to register: the method and its options. A [`Method`] alone is its defaults (no
 /// orientation prior).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -64,6 +92,8 @@ pub struct Options {
     /// same code on a fraction of the work, for the `register` fuzz target. `None` for
     /// every real use.
     pub som_iterations: Option<(u32, u32)>,
+    /// A step left out, for `eval --ablation` (`None` for every real use).
+    pub without: Option<Ablation>,
 }
 
 impl From<Method> for Options {
@@ -85,6 +115,9 @@ impl Options {
         if let Some((som1, som2)) = self.som_iterations {
             cfg.som1.iterations = som1;
             cfg.som2.iterations = som2;
+        }
+        if let Some(a) = self.without {
+            a.remove(&mut cfg);
         }
         cfg
     }
@@ -577,7 +610,7 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
     let how = Options {
         method: job.method,
         target_up: job.target_up,
-        som_iterations: None,
+        ..job.method.into()
     };
     if job.method == Method::Paper && job.target_up.is_some() {
         return Err(CliError::Usage(

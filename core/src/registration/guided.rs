@@ -27,12 +27,15 @@
 //!    frame, where x is lateral), resampled with 6/6/8/10 points between the rib's
 //!    outermost nodes; the stations are split at the sternum (mean x of the sternum
 //!    nodes) in the template's proportion, so each side of a rib stretches on its own
-//!    ([`fit_ribs`]);
+//!    ([`fit_ribs`]); a rib side shorter, against the template's, than every other rib
+//!    side is lengthened to the least of those ([`lengthen_short`], with
+//!    [`Config::lengthen_short_ribs`]): a lost lateral tip does not pull that side's
+//!    stations toward the sternum;
 //! 4. steps 2–3 repeat [`GUIDED_ROUNDS`] times, each round's skeleton pairs mapping the
 //!    template nodes more closely onto the target than a rigid pose can, and their
 //!    Kabsch fit giving the next round's fitting frame.
 
-use crate::config::{RIBS, RIB_SAMPLES};
+use crate::config::{Config, RIBS, RIB_SAMPLES};
 use crate::error::{Cloud, Error, Result, Side};
 use crate::limits::{CARRY_CACHE, FIT_SAMPLES, SKELETON_POINTS, SOM1_CAPACITY};
 use crate::math::fit::{equal_steps, PolyFit};
@@ -136,7 +139,7 @@ pub fn fit_ribs(
     for (i, p) in cloud.iter().enumerate().step_by(fit_stride(cloud.len())) {
         fits.add(label_of(i, p), p);
     }
-    fits.finish(split, which)
+    fits.finish(split, None, which)
 }
 
 /// The stride of the cloud points entering [`fit_ribs`] (at most [`FIT_SAMPLES`]).
@@ -195,17 +198,20 @@ impl RibFits {
         }
     }
 
-    /// The 30 skeleton points and the sternum fractions (see [`fit_ribs`]).
+    /// The 30 skeleton points and the sternum fractions (see [`fit_ribs`]). With `prior`
+    /// (the template's 30 skeleton points, in the fitting frame; needs `split`) a rib
+    /// side shorter than its share of the template's is lengthened ([`lengthen_short`]).
     pub fn finish(
         &self,
         split: Option<&[f32; 4]>,
+        prior: Option<&[Vec3; SKELETON_POINTS]>,
         which: Cloud,
     ) -> Result<([Vec3; SKELETON_POINTS], [f32; 4])> {
         let (sx, sn) = self.sternum;
         let back = self.to_fit.inverse();
-        let mut points = [Vec3::zeros(); SKELETON_POINTS];
-        let mut fractions = [0.5f32; 4];
-        let mut offset = 0;
+        let mut curves = [None; 4];
+        // Per rib: the observed extent (x0, x1) and the midline.
+        let mut ends = [(0.0f32, 0.0f32, 0.0f32); 4];
         for (r, &rib) in RIBS.iter().enumerate() {
             let found = self.fits[r].map_or(0, |f| f.count());
             let short = Error::RibPath {
@@ -217,14 +223,48 @@ impl RibFits {
             let f = self.fits[r]
                 .filter(|_| found >= MIN_RIB_POINTS)
                 .ok_or(short)?;
-            let [cy, cz] = f.solve(3).map_err(|_| short)?;
+            curves[r] = Some(f.solve(3).map_err(|_| short)?);
             let (x0, x1) = self.ext[r];
             let mid = if sn > 0.0 {
                 (sx / sn).clamp(x0, x1)
             } else {
                 0.5 * (x0 + x1)
             };
-            fractions[r] = (mid - x0) / (x1 - x0);
+            ends[r] = (x0, mid, x1);
+        }
+        let mut fractions = [0.5f32; 4];
+        for (fraction, &(x0, mid, x1)) in fractions.iter_mut().zip(&ends) {
+            *fraction = (mid - x0) / (x1 - x0);
+        }
+        let wide = match (split, prior) {
+            (Some(split), Some(prior)) => lengthen_short(&ends, split, prior),
+            _ => ends,
+        };
+        let mut points = [Vec3::zeros(); SKELETON_POINTS];
+        let mut offset = 0;
+        for (r, (&(x0, mid, x1), &(lo, _, hi))) in wide.iter().zip(&ends).enumerate() {
+            let Some([cy, cz]) = curves[r] else {
+                continue;
+            };
+            // Beyond the observed extent the curve goes on along its end's tangent (a
+            // cubic's own extrapolation turns away); within it, the fit itself.
+            let at = |x: f32| {
+                // The observed end beyond which x lies, and a point inside it.
+                let (end, inside) = if x < lo {
+                    (lo, lo + TANGENT_STEP_MM)
+                } else if x > hi {
+                    (hi, hi - TANGENT_STEP_MM)
+                } else {
+                    return Vec3::new(x, cy.eval(x), cz.eval(x));
+                };
+                let along = (x - end) / (end - inside);
+                let (y, z) = (cy.eval(end), cz.eval(end));
+                Vec3::new(
+                    x,
+                    y + (y - cy.eval(inside)) * along,
+                    z + (z - cz.eval(inside)) * along,
+                )
+            };
             // Stations at equal fractions of the rib; with `split` (the template's
             // midline fractions) each side of the midline scales on its own, so a rib end
             // missing on one side moves that side's stations only.
@@ -235,12 +275,67 @@ impl RibFits {
                 } else {
                     mid + (x1 - mid) * (f - fm) / (1.0 - fm)
                 };
-                points[offset + k] = back.apply(&Vec3::new(x, cy.eval(x), cz.eval(x)));
+                points[offset + k] = back.apply(&at(x));
             }
             offset += RIB_SAMPLES[r];
         }
         Ok((points, fractions))
     }
+}
+
+/// Step of the finite difference giving a rib curve's tangent at its observed end, mm.
+const TANGENT_STEP_MM: f32 = 2.0;
+
+/// The rib extents `ends` (per rib: lowest x, midline, highest x, in the template's frame)
+/// with each short rib side lengthened. A side's *share* is its span from the midline as
+/// a fraction of the template's same side (`prior`, its skeleton points, split at
+/// `split`). A side whose share is below every other side's, of any rib, is lengthened
+/// to the least of those: an ultrasound sweep loses a rib's lateral tip (a hole, a
+/// junction seen in part, SOM nodes drawn inward where points thin out) far more often
+/// than it adds one, and a patient's cartilages differ from the template's less from
+/// one rib to the next than a lost tip shortens one. A side below [`MIN_SIDE_SPAN`] is
+/// left as it is: that is a rib not seen, refused by [`check_coverage`], not guessed.
+pub fn lengthen_short(
+    ends: &[(f32, f32, f32); 4],
+    split: &[f32; 4],
+    prior: &[Vec3; SKELETON_POINTS],
+) -> [(f32, f32, f32); 4] {
+    // Template spans [right, left] per rib and the target's shares of them.
+    let mut spans = [[0.0f32; 2]; 4];
+    let mut shares = [[f32::NAN; 2]; 4];
+    let mut offset = 0;
+    for (r, &(x0, mid, x1)) in ends.iter().enumerate() {
+        let n = RIB_SAMPLES[r];
+        let (t0, t1) = (prior[offset].x, prior[offset + n - 1].x);
+        let tm = t0 + split[r] * (t1 - t0);
+        spans[r] = [tm - t0, t1 - tm];
+        shares[r] = [(mid - x0) / spans[r][0], (x1 - mid) / spans[r][1]];
+        offset += n;
+    }
+    let mut out = *ends;
+    for (r, out) in out.iter_mut().enumerate() {
+        for side in 0..2 {
+            let share = shares[r][side];
+            let mut least = f32::INFINITY;
+            for (q, s) in shares.iter().enumerate() {
+                for (t, &other) in s.iter().enumerate() {
+                    if (q, t) != (r, side) && other.is_finite() {
+                        least = least.min(other);
+                    }
+                }
+            }
+            if !(share >= MIN_SIDE_SPAN && share < least && least.is_finite()) {
+                continue;
+            }
+            let span = least * spans[r][side];
+            if side == 0 {
+                out.0 = out.1 - span;
+            } else {
+                out.2 = out.1 + span;
+            }
+        }
+    }
+    out
 }
 
 /// Per rib (2..=5), the span of the target's rib on the patient's right and left of the
@@ -540,7 +635,7 @@ impl TargetSkeleton {
     /// At most `budget` units of work (see the type's docs); `true` when done. The
     /// arguments must be the same at every call: the target `cloud` and its skeleton
     /// graph, the template's graph, node labels, 30 skeleton points and sternum split,
-    /// and `N_r`.
+    /// and the configuration (`N_r`, whether short ribs are lengthened).
     #[allow(clippy::too_many_arguments)]
     #[inline(never)]
     pub fn step(
@@ -551,7 +646,7 @@ impl TargetSkeleton {
         template_labels: &[u8],
         template_skeleton: &[Vec3; SKELETON_POINTS],
         template_split: &[f32; 4],
-        neighbours: usize,
+        cfg: &Config,
         budget: u32,
     ) -> Result<bool> {
         let budget = budget.max(1) as usize;
@@ -665,7 +760,8 @@ impl TargetSkeleton {
             }
             GuidedStage::Solve(round) => {
                 let ribs = self.ribs.take().ok_or(Error::RigidFit)?;
-                (self.skeleton, _) = ribs.finish(Some(template_split), Cloud::Target)?;
+                let prior = cfg.lengthen_short_ribs.then_some(template_skeleton);
+                (self.skeleton, _) = ribs.finish(Some(template_split), prior, Cloud::Target)?;
                 self.stage = if round < last_round {
                     GuidedStage::Refit(round)
                 } else {
@@ -680,7 +776,7 @@ impl TargetSkeleton {
                 self.map = Some(LocalRigid::new(
                     *template_skeleton,
                     self.skeleton,
-                    neighbours,
+                    cfg.neighbours,
                 )?);
                 self.cache = TransformCache::new();
                 self.lookup = None;
@@ -762,6 +858,70 @@ mod tests {
             offset += n;
         }
         p
+    }
+
+    #[test]
+    fn only_a_side_shorter_than_every_other_is_lengthened_to_the_least_other() {
+        let prior = skeleton(1.0, 1.0);
+        let split = [0.5; 4];
+        let full = (-100.0, 0.0, 100.0);
+        // Every side as long as the template's, or all of them 20 % shorter or longer
+        // (a smaller or larger patient): nothing changes.
+        for s in [0.8, 1.0, 1.2] {
+            let ends = [(-100.0 * s, 0.0, 100.0 * s); 4];
+            assert_eq!(lengthen_short(&ends, &split, &prior), ends);
+        }
+        // Rib 3's right side at 80 %, rib 4's left at 90 %: the right side of rib 3
+        // becomes 90 % (the least of the others, here rib 4's left); rib 4's left is not
+        // the shortest, and stays.
+        let ends = [full, (-80.0, 0.0, 100.0), (-100.0, 0.0, 90.0), full];
+        let out = lengthen_short(&ends, &split, &prior);
+        assert_eq!(out[1], (-90.0, 0.0, 100.0));
+        assert_eq!(out[2], ends[2]);
+        assert_eq!((out[0], out[3]), (full, full));
+        // A side below MIN_SIDE_SPAN is not seen: left for check_coverage to refuse.
+        let ends = [full, full, full, (-100.0, 0.0, 50.0)];
+        assert_eq!(lengthen_short(&ends, &split, &prior), ends);
+    }
+
+    #[test]
+    fn a_lengthened_rib_goes_on_along_its_end_tangent() {
+        // Rib r along y = -30 r + 0.2 x, z = 0.001 x² (bent), seen from -70 to 100 mm on
+        // rib 2 and from -100 to 100 on the others; the sternum node at x = 0.
+        let curve = |r: usize, x: f32| Vec3::new(x, -30.0 * r as f32 + 0.2 * x, 0.001 * x * x);
+        let mut nodes = heapless::Vec::<Vec3, 16>::new();
+        let mut labels = heapless::Vec::<u8, 16>::new();
+        for (r, &rib) in RIBS.iter().enumerate() {
+            let lo = if r == 0 { -70.0 } else { -100.0 };
+            for x in [lo, 100.0] {
+                nodes.push(curve(r, x)).unwrap();
+                labels.push(rib).unwrap();
+            }
+        }
+        nodes.push(Vec3::new(0.0, -45.0, 0.0)).unwrap();
+        labels.push(1).unwrap();
+        let mut fits = RibFits::new(&nodes, &labels, &Rigid::identity()).unwrap();
+        for (r, &rib) in RIBS.iter().enumerate() {
+            let lo = if r == 0 { -70.0 } else { -100.0 };
+            for x in equal_steps(lo, 100.0, 60) {
+                fits.add(rib, &curve(r, x));
+            }
+        }
+        let prior = skeleton(1.0, 1.0);
+        let (observed, _) = fits.finish(Some(&[0.5; 4]), None, Cloud::Target).unwrap();
+        assert!((observed[0].x + 70.0).abs() < 1e-3);
+        let (points, _) = fits
+            .finish(Some(&[0.5; 4]), Some(&prior), Cloud::Target)
+            .unwrap();
+        // Rib 2's right end moves out to -100 mm, on the tangent at -70 (slope 0.2 in y,
+        // -0.14 in z there; the 2 mm difference that estimates it is 0.002 off in z, 0.06
+        // mm over 30 mm); the other ribs are unchanged.
+        let end = points[0];
+        assert!((end.x + 100.0).abs() < 1e-3, "{end:?}");
+        let at = curve(0, -70.0);
+        assert!((end.y - (at.y - 30.0 * 0.2)).abs() < 0.05, "{end:?}");
+        assert!((end.z - (at.z + 30.0 * 0.14)).abs() < 0.1, "{end:?}");
+        assert_eq!(points[RIB_SAMPLES[0]..], observed[RIB_SAMPLES[0]..]);
     }
 
     #[test]

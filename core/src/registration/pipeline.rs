@@ -329,7 +329,7 @@ impl Registering {
                     &template.node_labels,
                     &template.skeleton.points,
                     &template.midline_fraction,
-                    cfg.neighbours,
+                    cfg,
                     budget,
                 )? {
                     return Ok(false);

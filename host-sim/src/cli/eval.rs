@@ -4,6 +4,7 @@ use super::Context;
 use ribreg_sim::error::CliError;
 use ribreg_sim::eval::{self, EvalConfig, EvalMethod};
 use ribreg_sim::phantom::{HardPart, Preset, Variant};
+use ribreg_sim::register::Ablation;
 use std::io::IsTerminal;
 use std::path::PathBuf;
 
@@ -29,6 +30,10 @@ pub struct Args {
     /// Only our two methods (skip the slower baselines).
     #[arg(long)]
     ours_only: bool,
+    /// Also ours (improved) with each of its steps left out in turn (an ablation of the
+    /// method: what each step brings; rows "ours (improved), no ...").
+    #[arg(long)]
+    ablation: bool,
     /// The robustness sweep instead of the accuracy table: every pair turned (a yaw grid,
     /// random rotations) and moved 0.5 m, sparse, or missing a side or rib 5; counts
     /// accepted runs, refusals and silent failures (writes robustness.md and .json).
@@ -64,6 +69,9 @@ pub fn run(args: &Args, ctx: &Context) -> Result<(), CliError> {
     let mut methods = EvalMethod::all();
     if args.ours_only {
         methods.retain(|m| matches!(m, EvalMethod::Ours(..)));
+    }
+    if args.ablation {
+        methods.extend(Ablation::ALL.iter().map(|&a| EvalMethod::Without(a)));
     }
     let jobs = args
         .jobs
