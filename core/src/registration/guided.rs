@@ -247,23 +247,20 @@ impl RibFits {
                 continue;
             };
             // Beyond the observed extent the curve goes on along its end's tangent (a
-            // cubic's own extrapolation turns away); within it, the fit itself.
-            let at = |x: f32| {
-                // The observed end beyond which x lies, and a point inside it.
-                let (end, inside) = if x < lo {
-                    (lo, lo + TANGENT_STEP_MM)
-                } else if x > hi {
-                    (hi, hi - TANGENT_STEP_MM)
-                } else {
-                    return Vec3::new(x, cy.eval(x), cz.eval(x));
-                };
-                let along = (x - end) / (end - inside);
-                let (y, z) = (cy.eval(end), cz.eval(end));
-                Vec3::new(
-                    x,
-                    y + (y - cy.eval(inside)) * along,
-                    z + (z - cz.eval(inside)) * along,
-                )
+            // cubic's own extrapolation turns away); within it, the fit itself. Each
+            // tangent is taken once (the fit's `f64` evaluations are soft-float on the
+            // controller).
+            let on = |x: f32| Vec3::new(x, cy.eval(x), cz.eval(x));
+            let tangent = |end: f32, inward: f32| {
+                let p = on(end);
+                (p, (p - on(end + inward)) / TANGENT_STEP_MM)
+            };
+            let below = (x0 < lo).then(|| tangent(lo, TANGENT_STEP_MM));
+            let above = (x1 > hi).then(|| tangent(hi, -TANGENT_STEP_MM));
+            let at = |x: f32| match (below, above) {
+                (Some((p, d)), _) if x < lo => p + d * (lo - x),
+                (_, Some((p, d))) if x > hi => p + d * (x - hi),
+                _ => on(x),
             };
             // Stations at equal fractions of the rib; with `split` (the template's
             // midline fractions) each side of the midline scales on its own, so a rib end
