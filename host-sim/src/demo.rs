@@ -134,12 +134,7 @@ pub fn run_demo(
     let template = to_core(&pair.template.points, Which::Template)?;
     let target = to_core(&pair.target, Which::Target)?;
     let waypoints = to_core(&pair.template_waypoints, Which::Query)?;
-    let labels: Vec<u8> = pair
-        .template
-        .labels
-        .iter()
-        .map(|&l| u8::try_from(l).unwrap_or(0))
-        .collect();
+    let labels = pair.core_labels();
     let t1 = Instant::now();
     let mut outcome = register_clouds(
         &template,

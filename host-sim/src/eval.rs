@@ -174,12 +174,7 @@ fn run_ours(pair: &PhantomPair, how: Options, labelled: bool) -> Result<Mapped, 
     let tpl = to_core(&pair.template.points, Which::Template).map_err(|e| e.to_string())?;
     let tgt = to_core(&pair.target, Which::Target).map_err(|e| e.to_string())?;
     let wps = to_core(&pair.template_waypoints, Which::Query).map_err(|e| e.to_string())?;
-    let labels: Vec<u8> = pair
-        .template
-        .labels
-        .iter()
-        .map(|&l| u8::try_from(l).unwrap_or(0))
-        .collect();
+    let labels = pair.core_labels();
     let labels = labelled.then_some(labels.as_slice());
     let o = register_clouds(&tpl, labels, &tgt, Some(&wps), how, &mut |_| ())
         .map_err(|e| e.to_string())?;
@@ -619,12 +614,7 @@ fn figures(cfg: &EvalConfig, results: &[CaseResult], out: &Path) -> Result<(), C
     });
     let tpl = to_core(&pair.template.points, Which::Template)?;
     let tgt = to_core(&pair.target, Which::Target)?;
-    let labels: Vec<u8> = pair
-        .template
-        .labels
-        .iter()
-        .map(|&l| u8::try_from(l).unwrap_or(0))
-        .collect();
+    let labels = pair.core_labels();
     let outcome = register_clouds(
         &tpl,
         Some(&labels),

@@ -614,6 +614,16 @@ impl PhantomPair {
             .collect()
     }
 
+    /// The template's labels as the core takes them (rib 2..=5, 1 sternum; any other
+    /// value 0, none).
+    pub fn core_labels(&self) -> Vec<u8> {
+        self.template
+            .labels
+            .iter()
+            .map(|&l| u8::try_from(l).unwrap_or(0))
+            .collect()
+    }
+
     /// Number of outliers in the target.
     pub fn outlier_count(&self) -> usize {
         self.target_material.iter().filter(|m| m.is_none()).count()
