@@ -63,8 +63,8 @@ fuzz_target!(|input: Input| {
         } else {
             Method::Improved
         },
-        target_up: None,
         som_iterations: Some((300, 150)),
+        ..Options::default()
     };
     if let Ok(out) = register_clouds(
         &template,
