@@ -115,10 +115,15 @@ pub const PRIOR_CONE_DEG: f32 = 60.0;
 
 /// Whether `a` and `b` are distinct pose hypotheses ([`DISTINCT_ROTATION_DEG`] apart).
 pub fn distinct(a: &Rigid, b: &Rigid) -> bool {
+    apart(a, b, DISTINCT_ROTATION_DEG)
+}
+
+/// Whether the rotations of `a` and `b` differ by more than `deg` degrees.
+pub fn apart(a: &Rigid, b: &Rigid, deg: f32) -> bool {
     // Rotation angle of aᵀb from its trace, compared as a cosine (no acos).
     let trace = (a.rotation.transpose() * b.rotation).trace();
     let cos = (trace - 1.0) * 0.5;
-    cos < libm::cosf(DISTINCT_ROTATION_DEG.to_radians())
+    cos < libm::cosf(deg.to_radians())
 }
 
 /// [`coarse_pose`] in bounded steps (see [`Icp::step`]); the starts run one after the

@@ -44,21 +44,22 @@ use crate::math::geom::{Frame, Rigid};
 use crate::math::kabsch;
 use crate::math::kdtree::KdTree;
 use crate::registration::endpoints::{
-    distinct, CoarsePose, Icp, IcpTree, CANDIDATES, PRIOR_CONE_DEG,
+    apart, distinct, CoarsePose, Icp, IcpTree, CANDIDATES, PRIOR_CONE_DEG,
 };
 use crate::registration::local_rigid::{LocalRigid, Lookup, TransformCache};
 use crate::registration::skeleton::SkeletonGraph;
 use crate::Vec3;
 
 /// A target node farther than this from every carried template node stays unlabelled,
-/// and so does a target point farther than this from every target node, mm. Below the
-/// least rib spacing (24 mm). 12 mm cut the patient's lateral tips where they reach past
-/// the template's (measured rib-side shares of the template's against the true ones, 20
-/// hard phantoms: slope 0.83 at 12 mm, 0.91 at 20 mm). `ribreg eval --preset both
-/// --ours-only --pairs 50`, mean / max waypoint error of the aligned pairs, standard and
-/// hard: 12 mm 2.16 / 7.8 and 3.65 / 15.9; 16 mm 2.15 / 6.8 and 3.55 / 14.2; 20 mm 2.14 /
-/// 6.8 and 3.45 / 13.0; 26 mm 2.16 / 6.7 and 3.41 / 13.0.
-pub const LABEL_RADIUS_MM: f32 = 20.0;
+/// and so does a target point farther than this from every target node, mm. Also tried:
+/// 20 mm for the nodes (below the least rib spacing, 24 mm), which lets a node past the
+/// template's rib end join the patient's longer rib. It helped the phantoms (`ribreg eval
+/// --preset both --ours-only --pairs 50`: mean / max waypoint error 2.18 / 7.9 → 2.15 /
+/// 6.7 mm standard, 3.68 / 15.8 → 3.50 / 13.0 hard; silent failures of the hard
+/// robustness sweep 80 → 56 of 520) but not the controller's compounded sweeps (`ribreg
+/// hil --in-process --seed S`, S = 0..9: mean 2.13 → 2.29 mm, seed 4 5.8 → 7.8 mm), so
+/// it was not kept.
+pub const LABEL_RADIUS_MM: f32 = 12.0;
 /// Labelling / fitting rounds.
 pub const GUIDED_ROUNDS: usize = 3;
 /// ICP rounds refining the coarse pose on all SOM-1 nodes.
@@ -82,8 +83,18 @@ pub const MIN_POSE_MARGIN: f32 = 1.25;
 /// (waypoints 34–40 mm off, refused as a rib not seen), and only the identity start, near
 /// the truth on an unturned sweep, found the right one. ±12° reaches it from every such
 /// start measured (`eval --robustness --preset hard --ours-only --pairs 20`: refusals of
-/// complete sweeps 211 → 90 of 520). Each turn costs the controller about 5 M instructions.
+/// complete sweeps 211 → 90 of 520). A turn that comes back to the minimum it left is
+/// dropped ([`SAME_MINIMUM_DEG`]): its residual differs from the first one's only by the
+/// ICP's last pairing, and taking it moved the controller's compounded sweeps' waypoints
+/// by up to 1.8 mm, worse on average. Each turn costs the controller about 5 M
+/// instructions.
 pub const TURNS_DEG: [f32; 2] = [-12.0, 12.0];
+/// A turn whose refined pose ends within this of the pose it turned found the same
+/// minimum and is dropped, degrees: the minima a turn is for lie 9–16° apart, and on
+/// the controller's compounded sweeps (`hil --in-process`, seeds 0–9, full and quick)
+/// every turn ended within 3° of where it started, so those 20 runs map exactly as
+/// without turns.
+pub const SAME_MINIMUM_DEG: f32 = 3.0;
 /// Hypotheses refined: the coarse ones and the turns.
 pub const REFINED: usize = CANDIDATES + TURNS_DEG.len();
 
@@ -726,8 +737,13 @@ impl TargetSkeleton {
                     queries as u32,
                 )? {
                     let h = usize::from(self.hypothesis);
-                    if let Some(slot) = self.refined.get_mut(h) {
-                        *slot = Some((self.icp.pose(), self.icp.rms()));
+                    let found = (self.icp.pose(), self.icp.rms());
+                    // A turn that ends where the pose it turned ended is that pose again.
+                    let again = h >= CANDIDATES
+                        && PoseConfidence::choose(&self.refined[..CANDIDATES])
+                            .is_some_and(|(base, _)| !apart(&found.0, &base, SAME_MINIMUM_DEG));
+                    if let Some(slot) = self.refined.get_mut(h).filter(|_| !again) {
+                        *slot = Some(found);
                     }
                     self.hypothesis = self.hypothesis.saturating_add(1);
                     if let Some((next, _)) = self.coarse.candidate(h + 1) {
