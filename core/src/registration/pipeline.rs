@@ -360,16 +360,43 @@ impl Registering {
             .take_graph()
             .ok_or(Error::Config("the skeleton graph build did not finish"))?;
         if let (RibModel::Guided, None) = (cfg.rib_model, &template.ends) {
-            // The run (~13 KiB) is started in place, not built on the stack and moved.
-            self.stage = Stage::Guided(graph, TargetSkeleton::new());
-            if let Stage::Guided(graph, run) = &mut self.stage {
-                run.start(graph, &template.graph, &template.node_labels, cfg.target_up)?;
-            }
+            self.start_guided(graph, template, cfg)?;
             return Ok(false);
         }
+        self.finish_graph(graph, template, cfg)?;
+        Ok(true)
+    }
+
+    /// The guided stage starts on `graph`. A function of its own, like
+    /// [`Registering::finish_graph`], so that the stack frame of the one does not add to
+    /// the other's in [`Registering::graph_done`] (together they outgrew the controller's
+    /// stack once the run's state grew by two pose hypotheses).
+    #[inline(never)]
+    fn start_guided(
+        &mut self,
+        graph: SkeletonGraph,
+        template: &Template,
+        cfg: &Config,
+    ) -> Result<()> {
+        // The run (~13 KiB) is started in place, not built on the stack and moved.
+        self.stage = Stage::Guided(graph, TargetSkeleton::new());
+        if let Stage::Guided(graph, run) = &mut self.stage {
+            run.start(graph, &template.graph, &template.node_labels, cfg.target_up)?;
+        }
+        Ok(())
+    }
+
+    /// The graph model's endpoint matching and mapping finish the registration.
+    #[inline(never)]
+    fn finish_graph(
+        &mut self,
+        graph: SkeletonGraph,
+        template: &Template,
+        cfg: &Config,
+    ) -> Result<()> {
         let (pose, matching, skeleton) = graph_skeleton(template, &graph, cfg)?;
         self.stage = Stage::Done(finish(template, graph, pose, matching, skeleton, cfg)?);
-        Ok(true)
+        Ok(())
     }
 
     /// The guided target skeleton is done: the mapping finishes the registration.
