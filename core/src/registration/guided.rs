@@ -80,9 +80,9 @@ pub const MIN_POSE_MARGIN: f32 = 1.25;
 /// hypothesis, each refined as a hypothesis of its own. The cartilages are near-parallel
 /// curves in the chest's plane, so ICP has shallow minima a few degrees apart about the
 /// anterior axis: on hard phantoms the principal-axis starts ended 9–16° off there
-/// (waypoints 34–40 mm off, refused as a rib not seen), and only the identity start, near
-/// the truth on an unturned sweep, found the right one. ±12° reaches it from every such
-/// start measured (`eval --robustness --preset hard --ours-only --pairs 20`: refusals of
+/// (waypoints 34–40 mm off, refused as a rib not seen or as ambiguous), and only the
+/// identity start, near the truth on an unturned sweep, found the right one. ±12° reaches
+/// it for the three phantoms checked (5, 7, 12 turned by 45°) (`eval --robustness --preset hard --ours-only --pairs 20`: refusals of
 /// complete sweeps 211 → 90 of 520). A turn that comes back to the minimum it left is
 /// dropped ([`SAME_MINIMUM_DEG`]): its residual differs from the first one's only by the
 /// ICP's last pairing, and taking it moved the controller's compounded sweeps' waypoints
