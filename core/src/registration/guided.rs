@@ -82,8 +82,9 @@ pub const MIN_POSE_MARGIN: f32 = 1.25;
 /// anterior axis: on hard phantoms the principal-axis starts ended 9–16° off there
 /// (waypoints 34–40 mm off, refused as a rib not seen or as ambiguous), and only the
 /// identity start, near the truth on an unturned sweep, found the right one. ±12° reaches
-/// it for the three phantoms checked (5, 7, 12 turned by 45°) (`eval --robustness --preset hard --ours-only --pairs 20`: refusals of
-/// complete sweeps 211 → 90 of 520). A turn that comes back to the minimum it left is
+/// it on the three phantoms checked (5, 7 and 12 turned by 45°); `eval --robustness
+/// --preset hard --ours-only --pairs 20`: refusals of complete sweeps 211 → 90 of 520.
+/// A turn that comes back to the minimum it left is
 /// dropped ([`SAME_MINIMUM_DEG`]): its residual differs from the first one's only by the
 /// ICP's last pairing, and taking it moved the controller's compounded sweeps' waypoints
 /// by up to 1.8 mm, worse on average. Each turn costs the controller about 5 M
