@@ -183,8 +183,8 @@ fn som_nodes_agree() {
             let core1 = Som::<400>::train(&cloud, &frame, &cfg1).unwrap();
             let ref1 = r::Som::train(&c64, cfg1.rows, cfg1.cols, &frame_to64(&frame), &p1);
             let (mean, max) = (
-                mean_pair_dist(core1.nodes(), &ref1.nodes),
-                max_pair_dist(core1.nodes(), &ref1.nodes),
+                mean_pair_dist(&core1.nodes().collect::<Vec<_>>(), &ref1.nodes),
+                max_pair_dist(&core1.nodes().collect::<Vec<_>>(), &ref1.nodes),
             );
             m1 = m1.max(mean);
             x1 = x1.max(max);
@@ -221,8 +221,8 @@ fn som_nodes_agree() {
                 &p2,
             );
             let (mean, max) = (
-                mean_pair_dist(core2.nodes(), &ref2.nodes),
-                max_pair_dist(core2.nodes(), &ref2.nodes),
+                mean_pair_dist(&core2.nodes().collect::<Vec<_>>(), &ref2.nodes),
+                max_pair_dist(&core2.nodes().collect::<Vec<_>>(), &ref2.nodes),
             );
             m2 = m2.max(mean);
             x2 = x2.max(max);

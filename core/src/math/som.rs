@@ -26,15 +26,23 @@ use crate::math::rng::Rng;
 use crate::Vec3;
 
 /// A trained (or initialised) map of `rows × cols ≤ CAP` nodes, stored row after row.
+///
+/// One array per coordinate (12 B a node, as `[Vec3; CAP]`): the BMU scan and the
+/// update then read consecutive floats, which the host's compiler turns into SIMD (four
+/// nodes an instruction); the Cortex-M4F loads the same three floats a node either way.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Som<const CAP: usize> {
     rows: usize,
     cols: usize,
-    nodes: heapless::Vec<Vec3, CAP>,
+    x: [f32; CAP],
+    y: [f32; CAP],
+    z: [f32; CAP],
 }
 
-/// Independent running minima of [`Som::bmu`].
+/// Independent running minima of [`Som::bmu`]'s one-pass scan.
 const LANES: usize = 4;
+/// Distances [`Som::bmu`]'s passes test at once for the least one.
+const BLOCK: usize = 16;
 
 impl<const CAP: usize> Som<CAP> {
     /// Trains a map on `points` (any non-empty size; nothing is copied) with `frame` the
@@ -72,46 +80,88 @@ impl<const CAP: usize> Som<CAP> {
                 2.0 * (k as f32 / (of - 1) as f32) - 1.0
             }
         };
+        if rows.saturating_mul(cols) > CAP {
+            return Err(Error::Capacity {
+                capacity: CAP as u32,
+            });
+        }
         let e1 = frame.axes.column(0) * (2.0 * frame.spread[0]);
         let e2 = frame.axes.column(1) * (2.0 * frame.spread[1]);
-        let mut nodes = heapless::Vec::new();
+        let mut som = Som {
+            rows,
+            cols,
+            x: [0.0; CAP],
+            y: [0.0; CAP],
+            z: [0.0; CAP],
+        };
         for r in 0..rows {
             for c in 0..cols {
-                nodes
-                    .push(frame.origin + e1 * span(c, cols) + e2 * span(r, rows))
-                    .map_err(|_| Error::Capacity {
-                        capacity: CAP as u32,
-                    })?;
+                som.set(
+                    r * cols + c,
+                    frame.origin + e1 * span(c, cols) + e2 * span(r, rows),
+                );
             }
         }
-        Ok(Som { rows, cols, nodes })
+        Ok(som)
+    }
+
+    /// Number of nodes, `rows × cols`.
+    fn len(&self) -> usize {
+        // Note: linear_init checked rows × cols <= CAP.
+        self.rows * self.cols
+    }
+
+    /// Node `k` (row after row).
+    pub fn node(&self, k: usize) -> Vec3 {
+        Vec3::new(self.x[k], self.y[k], self.z[k])
+    }
+
+    fn set(&mut self, k: usize, w: Vec3) {
+        (self.x[k], self.y[k], self.z[k]) = (w.x, w.y, w.z);
     }
 
     /// Grid position (row, column) of the node nearest to `p`; ties go to the first.
+    ///
+    /// Two scans give that answer bit for bit (`bmu_equals_a_plain_scan`): the one of
+    /// straight passes that a host's SIMD runs fastest, and one pass with running minima
+    /// where every instruction is a scalar one (the Cortex-M4F: the passes cost it 22 %
+    /// more instructions for the whole registration).
     pub fn bmu(&self, p: &Vec3) -> (usize, usize) {
-        // Four running minima (node k in lane k mod 4), so that each distance waits on
-        // its lane's last comparison, not on every earlier node's: the first node of the
-        // least distance wins either way (each lane keeps its first, then the lowest
-        // index among equal lane minima).
+        let best = if cfg!(target_arch = "arm") {
+            self.nearest_by_lanes(p)
+        } else {
+            self.nearest_by_passes(p)
+        };
+        (best / self.cols.max(1), best % self.cols.max(1))
+    }
+
+    /// [`Som::bmu`]'s node in one pass: four running minima (node k in lane k mod 4), so
+    /// that each distance waits on its lane's last comparison, not on every earlier
+    /// node's; the first node of the least distance wins either way (each lane keeps its
+    /// first, then the lowest index among equal lane minima).
+    fn nearest_by_lanes(&self, p: &Vec3) -> usize {
+        let n = self.len();
+        let (xs, ys, zs) = (&self.x[..n], &self.y[..n], &self.z[..n]);
         let mut lane = [(f32::INFINITY, 0usize); LANES];
-        let chunks = self.nodes.chunks_exact(LANES);
-        let rest = chunks.remainder();
-        for (c, chunk) in chunks.enumerate() {
-            let d: [f32; LANES] = core::array::from_fn(|l| (chunk[l] - p).norm_squared());
+        let chunks = xs
+            .chunks_exact(LANES)
+            .zip(ys.chunks_exact(LANES))
+            .zip(zs.chunks_exact(LANES));
+        for (c, ((cx, cy), cz)) in chunks.enumerate() {
             // Indexed, not zipped: the zipped loop measured 10 % slower on the host
             // (whole `register`), its lanes no longer kept in registers.
             #[allow(clippy::needless_range_loop)]
             for l in 0..LANES {
-                if d[l] < lane[l].0 {
-                    lane[l] = (d[l], c * LANES + l);
+                let d = distance_sq(cx[l], cy[l], cz[l], p);
+                if d < lane[l].0 {
+                    lane[l] = (d, c * LANES + l);
                 }
             }
         }
-        let first = self.nodes.len() - rest.len();
-        for (j, w) in rest.iter().enumerate() {
-            let d = (w - p).norm_squared();
+        for (j, k) in (n - n % LANES..n).enumerate() {
+            let d = distance_sq(xs[k], ys[k], zs[k], p);
             if d < lane[j].0 {
-                lane[j] = (d, first + j);
+                lane[j] = (d, k);
             }
         }
         let (mut best_d, mut best) = lane[0];
@@ -120,7 +170,33 @@ impl<const CAP: usize> Som<CAP> {
                 (best_d, best) = (d, k);
             }
         }
-        (best / self.cols.max(1), best % self.cols.max(1))
+        best
+    }
+
+    /// [`Som::bmu`]'s node in three straight passes: every squared distance, the least
+    /// of them, the first node at it. A sum of squares is +0 or above (or NaN), where an
+    /// IEEE float's bits order as its value: the least is an integer minimum, which
+    /// compilers vectorise (a float one they may not reorder).
+    fn nearest_by_passes(&self, p: &Vec3) -> usize {
+        let n = self.len();
+        let mut bits = [0i32; CAP];
+        let bits = &mut bits[..n];
+        let (xs, ys, zs) = (&self.x[..n], &self.y[..n], &self.z[..n]);
+        for (((b, &x), &y), &z) in bits.iter_mut().zip(xs).zip(ys).zip(zs) {
+            // Note: the sign bit is clear (see above), the cast keeps the order.
+            *b = distance_sq(x, y, z, p).to_bits() as i32;
+        }
+        let least = bits.iter().fold(i32::MAX, |m, &b| m.min(b));
+        // A NaN is never less than the infinity a scan starts from: then the first node.
+        if least > f32::INFINITY.to_bits() as i32 {
+            return 0;
+        }
+        // Sixteen at a time, a block's test one SIMD compare, then the node within it.
+        bits.chunks(BLOCK)
+            .enumerate()
+            .find(|(_, c)| c.iter().fold(false, |hit, &b| hit | (b == least)))
+            .and_then(|(k, c)| Some(k * BLOCK + c.iter().position(|&b| b == least)?))
+            .unwrap_or(0)
     }
 
     /// The nodes that are the best matching unit of at least one of `points` (all of
@@ -139,9 +215,17 @@ impl<const CAP: usize> Som<CAP> {
     }
 
     /// All nodes, row after row.
-    pub fn nodes(&self) -> &[Vec3] {
-        &self.nodes
+    pub fn nodes(&self) -> impl Iterator<Item = Vec3> + '_ {
+        (0..self.len()).map(|k| self.node(k))
     }
+}
+
+/// The squared distance from the node at `(x, y, z)` to `p`, `norm_squared`'s term for
+/// term: `w − p`, then `dx² + dy² + dz²` from the left.
+#[inline(always)]
+fn distance_sq(x: f32, y: f32, z: f32, p: &Vec3) -> f32 {
+    let (dx, dy, dz) = (x - p.x, y - p.y, z - p.z);
+    dx * dx + dy * dy + dz * dz
 }
 
 /// [`Som::live_nodes`] in bounded steps: [`LiveScan::step`] finds the best matching
@@ -193,9 +277,9 @@ impl<const CAP: usize> LiveScan<CAP> {
         out: &mut heapless::Vec<Vec3, M>,
     ) -> Result<()> {
         out.clear();
-        for (w, &h) in som.nodes.iter().zip(&self.hit) {
+        for (w, &h) in som.nodes().zip(&self.hit) {
             if h {
-                out.push(*w)
+                out.push(w)
                     .map_err(|_| Error::Capacity { capacity: M as u32 })?;
             }
         }
@@ -266,15 +350,18 @@ impl SomTrainer {
             for (c, g) in g_col.iter_mut().enumerate().take(c1 + 1).skip(c0) {
                 *g = lr * gauss[c.abs_diff(bc)];
             }
-            for (row, gr) in som
-                .nodes
-                .chunks_exact_mut(cols)
-                .skip(r0)
-                .take(r1 + 1 - r0)
-                .zip(&g_row[r0..=r1])
-            {
-                for (w, gc) in row[c0..=c1].iter_mut().zip(&g_col[c0..=c1]) {
-                    *w += (p - *w) * (gr * gc);
+            // `w += (p − w) θ lr` per coordinate, as nalgebra's vector expression did.
+            for (r, gr) in (r0..=r1).zip(&g_row[r0..=r1]) {
+                let row = r * cols + c0..r * cols + c1 + 1;
+                let nodes = som.x[row.clone()]
+                    .iter_mut()
+                    .zip(&mut som.y[row.clone()])
+                    .zip(&mut som.z[row]);
+                for (((x, y), z), gc) in nodes.zip(&g_col[c0..c1 + 1]) {
+                    let g = gr * gc;
+                    *x += (p.x - *x) * g;
+                    *y += (p.y - *y) * g;
+                    *z += (p.z - *z) * g;
                 }
             }
         }
@@ -287,8 +374,9 @@ impl SomTrainer {
 mod tests {
     use super::*;
 
-    /// The four-lane BMU search equals a plain scan of `norm_squared` distances, the
-    /// first of equal distances winning (coarse coordinates make ties common).
+    /// Both BMU scans equal a plain scan of `norm_squared` distances, the first of equal
+    /// distances winning (coarse coordinates make ties common), and a NaN sample gives
+    /// the first node, as that scan does.
     #[test]
     fn bmu_equals_a_plain_scan() {
         let mut rng = crate::math::rng::Rng::new(11);
@@ -296,26 +384,33 @@ mod tests {
         for _ in 0..200 {
             // 48 nodes fill the four lanes evenly, 35 leave a remainder.
             let (rows, cols) = if rng.below(2) == 0 { (6, 8) } else { (5, 7) };
-            let mut nodes = heapless::Vec::<Vec3, 64>::new();
-            for _ in 0..rows * cols {
-                let _ = nodes.push(Vec3::new(
-                    coarse(&mut rng),
-                    coarse(&mut rng),
-                    coarse(&mut rng),
-                ));
+            let mut som = Som::<64> {
+                rows,
+                cols,
+                x: [0.0; 64],
+                y: [0.0; 64],
+                z: [0.0; 64],
+            };
+            for k in 0..rows * cols {
+                let w = Vec3::new(coarse(&mut rng), coarse(&mut rng), coarse(&mut rng));
+                som.set(k, w);
             }
-            let som = Som { rows, cols, nodes };
             for _ in 0..50 {
                 let p = Vec3::new(coarse(&mut rng), coarse(&mut rng), coarse(&mut rng) + 0.5);
                 let mut best = (f32::INFINITY, 0);
-                for (k, w) in som.nodes.iter().enumerate() {
+                for (k, w) in som.nodes().enumerate() {
                     let d = (w - p).norm_squared();
                     if d < best.0 {
                         best = (d, k);
                     }
                 }
                 assert_eq!(som.bmu(&p), (best.1 / cols, best.1 % cols));
+                assert_eq!(som.nearest_by_lanes(&p), best.1);
+                assert_eq!(som.nearest_by_passes(&p), best.1);
             }
+            let nan = Vec3::new(f32::NAN, 0.0, 0.0);
+            assert_eq!(som.nearest_by_lanes(&nan), 0);
+            assert_eq!(som.nearest_by_passes(&nan), 0);
         }
     }
 
@@ -348,11 +443,12 @@ mod tests {
         // Every node ends on the sheet, and the map spreads over it: the nodes cover
         // its corners to within a grid cell of the 5 × 8 map (25 × 20 mm).
         for w in a.nodes() {
-            let d = crate::math::geom::nearest(&pts, w).unwrap().1.sqrt();
+            let d = crate::math::geom::nearest(&pts, &w).unwrap().1.sqrt();
             assert!(d < 3.0, "node {w:?} is {d} mm off the data");
         }
         for corner in [Vec3::new(-100.0, -40.0, 5.0), Vec3::new(100.0, 40.0, 5.0)] {
-            let d = crate::math::geom::nearest(a.nodes(), &corner)
+            let nodes: heapless::Vec<Vec3, 40> = a.nodes().collect();
+            let d = crate::math::geom::nearest(&nodes, &corner)
                 .unwrap()
                 .1
                 .sqrt();
