@@ -174,17 +174,15 @@ impl<const CAP: usize> Som<CAP> {
     }
 
     /// [`Som::bmu`]'s node in three straight passes: every squared distance, the least
-    /// of them, the first node at it. A sum of squares is +0 or above (or NaN), where an
-    /// IEEE float's bits order as its value: the least is an integer minimum, which
-    /// compilers vectorise (a float one they may not reorder).
+    /// of them, the first node at it. The least is an integer minimum of
+    /// [`order_key`]s, which compilers vectorise (a float one they may not reorder).
     fn nearest_by_passes(&self, p: &Vec3) -> usize {
         let n = self.len();
         let mut bits = [0i32; CAP];
         let bits = &mut bits[..n];
         let (xs, ys, zs) = (&self.x[..n], &self.y[..n], &self.z[..n]);
         for (((b, &x), &y), &z) in bits.iter_mut().zip(xs).zip(ys).zip(zs) {
-            // Note: the sign bit is clear (see above), the cast keeps the order.
-            *b = distance_sq(x, y, z, p).to_bits() as i32;
+            *b = order_key(distance_sq(x, y, z, p));
         }
         let least = bits.iter().fold(i32::MAX, |m, &b| m.min(b));
         // A NaN is never less than the infinity a scan starts from: then the first node.
@@ -218,6 +216,15 @@ impl<const CAP: usize> Som<CAP> {
     pub fn nodes(&self) -> impl Iterator<Item = Vec3> + '_ {
         (0..self.len()).map(|k| self.node(k))
     }
+}
+
+/// A squared distance's bits as an integer that orders as the distance does: a sum of
+/// squares is +0 or above, where an IEEE float's bits order as its value, or NaN, whose
+/// sign bit (set in x86's default NaN) is cleared so that every NaN orders above +∞.
+#[inline(always)]
+fn order_key(d2: f32) -> i32 {
+    // Note: with the sign bit cleared the value is below 2^31, the cast keeps it.
+    (d2.to_bits() & 0x7fff_ffff) as i32
 }
 
 /// The squared distance from the node at `(x, y, z)` to `p`, `norm_squared`'s term for
@@ -408,9 +415,21 @@ mod tests {
                 assert_eq!(som.nearest_by_lanes(&p), best.1);
                 assert_eq!(som.nearest_by_passes(&p), best.1);
             }
-            let nan = Vec3::new(f32::NAN, 0.0, 0.0);
-            assert_eq!(som.nearest_by_lanes(&nan), 0);
-            assert_eq!(som.nearest_by_passes(&nan), 0);
+            // Both signs of NaN (x86's default NaN has the sign bit set).
+            for nan in [
+                Vec3::new(f32::NAN, 0.0, 0.0),
+                Vec3::new(-f32::NAN, 0.0, 0.0),
+            ] {
+                assert_eq!(som.nearest_by_lanes(&nan), 0);
+                assert_eq!(som.nearest_by_passes(&nan), 0);
+            }
+            // One node's distance a NaN made by the FPU (∞ − ∞), the others' ∞: no node
+            // is nearer than the scan's start, so the first.
+            let mut far = som.clone();
+            far.x[5] = f32::INFINITY;
+            let inf = Vec3::new(f32::INFINITY, 0.0, 0.0);
+            assert_eq!(far.nearest_by_lanes(&inf), 0);
+            assert_eq!(far.nearest_by_passes(&inf), 0);
         }
     }
 
