@@ -803,49 +803,55 @@ pub type Output<'a> = (
 );
 
 /// Writes every output, each on a thread of its own so that their `fsync`s overlap (each
-/// file is written atomically, by its own writer's `write_atomic`). If any fails, the
-/// others that were written are removed and the first failure in the given order is
-/// returned: a run leaves all of its outputs or none.
-pub fn write_all_or_none(outputs: Vec<Output<'_>>) -> Result<(), IoError> {
-    let results: Vec<(&Path, Result<(), IoError>)> = std::thread::scope(|s| {
-        let mut outputs = outputs.into_iter();
-        let first = outputs.next();
-        let others: Vec<_> = outputs
+/// file is written atomically, by its own writer's `write_atomic`), while `meanwhile`
+/// runs on this thread; the output it returns, if any, is written after it, here. If
+/// any write fails, or `meanwhile` does, the outputs that were written are removed and
+/// the first failure is returned (`meanwhile`'s, else the writes' in the given order): a
+/// run leaves all of its outputs or none.
+pub fn write_all_or_none<'a, T, E: From<IoError>>(
+    outputs: Vec<Output<'a>>,
+    meanwhile: impl FnOnce() -> Result<(T, Option<Output<'a>>), E>,
+) -> Result<T, E> {
+    let (late, results) = std::thread::scope(|s| {
+        let handles: Vec<_> = outputs
+            .into_iter()
             .map(|(path, write)| (path, s.spawn(write)))
             .collect();
-        let mut results: Vec<_> = first
-            .map(|(path, write)| (path, write()))
+        let late = meanwhile().map(|(value, output)| {
+            let written = output.map(|(path, write)| (path, write()));
+            (value, written)
+        });
+        let results: Vec<(&Path, Result<(), IoError>)> = handles
             .into_iter()
+            .map(|(path, handle)| {
+                // A writer that panicked goes on panicking here.
+                let result = handle
+                    .join()
+                    .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+                (path, result)
+            })
             .collect();
-        for (path, handle) in others {
-            // A writer that panicked goes on panicking here.
-            let result = handle
-                .join()
-                .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
-            results.push((path, result));
-        }
-        results
+        (late, results)
     });
+    let (mut outcome, late): (Result<T, E>, _) = match late {
+        Ok((value, written)) => (Ok(value), written),
+        Err(e) => (Err(e), None),
+    };
     let mut written = Vec::new();
-    let mut failure = None;
-    for (path, result) in results {
+    for (path, result) in results.into_iter().chain(late) {
         match result {
             Ok(()) => written.push(path),
-            Err(e) => {
-                failure.get_or_insert(e);
-            }
+            Err(e) if outcome.is_ok() => outcome = Err(E::from(e)),
+            Err(_) => {}
         }
     }
-    match failure {
-        Some(e) => {
-            for path in written {
-                // Best effort: the file is ours, written by this run.
-                let _ = fs::remove_file(path);
-            }
-            Err(e)
+    if outcome.is_err() {
+        for path in written {
+            // Best effort: the file is ours, written by this run.
+            let _ = fs::remove_file(path);
         }
-        None => Ok(()),
     }
+    outcome
 }
 
 /// Test support: the next value of a small deterministic generator (an LCG) for the
@@ -950,6 +956,52 @@ mod tests {
             write_text(&nowhere, "{}"),
             Err(IoError::Io { .. })
         ));
+    }
+
+    /// The outputs are written while `meanwhile` runs; a failure of `meanwhile`, of an
+    /// output, or of the output `meanwhile` hands back leaves none of them behind.
+    #[test]
+    fn write_all_or_none_leaves_every_output_or_none() {
+        let dir = tempfile::tempdir().unwrap();
+        let (a, b, c) = (
+            dir.path().join("a.txt"),
+            dir.path().join("b.txt"),
+            dir.path().join("c.txt"),
+        );
+        let nowhere = dir.path().join("none").join("c.txt");
+        let early = || -> Vec<Output<'_>> {
+            vec![
+                (&a, Box::new(|| write_text(&a, "a"))),
+                (&b, Box::new(|| write_text(&b, "b"))),
+            ]
+        };
+        fn late(path: &Path) -> Output<'_> {
+            (path, Box::new(move || write_text(path, "c")))
+        }
+        let (c_path, nowhere) = (c.as_path(), nowhere.as_path());
+        // Everything written, and `meanwhile`'s value returned.
+        let value = write_all_or_none(early(), || Ok::<_, IoError>((7, Some(late(c_path)))));
+        assert_eq!(value.unwrap(), 7);
+        for (p, text) in [(&a, "a"), (&b, "b"), (&c, "c")] {
+            assert_eq!(fs::read_to_string(p).unwrap(), text);
+            fs::remove_file(p).unwrap();
+        }
+        // `meanwhile` fails: its error, and the outputs written meanwhile are removed.
+        let failed = write_all_or_none(early(), || -> Result<((), _), IoError> {
+            Err(FormatError::NoPoints.into())
+        });
+        assert!(matches!(failed, Err(IoError::Format { .. })), "{failed:?}");
+        // The late output fails: the early ones are removed.
+        let failed = write_all_or_none(early(), || Ok::<_, IoError>(((), Some(late(nowhere)))));
+        assert!(matches!(failed, Err(IoError::Io { .. })), "{failed:?}");
+        // An early output fails: the late one and the other early one are removed.
+        let outputs: Vec<Output<'_>> = vec![
+            (&a, Box::new(|| write_text(&a, "a"))),
+            (nowhere, Box::new(|| write_text(nowhere, "x"))),
+        ];
+        let failed = write_all_or_none(outputs, || Ok::<_, IoError>(((), Some(late(c_path)))));
+        assert!(matches!(failed, Err(IoError::Io { .. })), "{failed:?}");
+        assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 0);
     }
 
     #[test]

@@ -11,7 +11,7 @@ use crate::io::{self, Cloud, PlyFormat};
 use ribreg_core::config::{Config, RIBS, RIB_SAMPLES};
 use ribreg_core::error::Cloud as Which;
 use ribreg_core::registration::local_rigid::TransformCache;
-use ribreg_core::registration::metrics::Metrics;
+use ribreg_core::registration::metrics::{closest_distances, KdTree, Metrics};
 use ribreg_core::registration::pipeline::{register, Registration, Template};
 use ribreg_core::registration::{anterior, guided};
 
@@ -304,26 +304,7 @@ pub fn register_clouds(
     how: impl Into<Options>,
     progress: &mut dyn FnMut(&str),
 ) -> Result<RegisterOutcome, Error> {
-    let how = how.into();
-    let t0 = Instant::now();
-    let tpl = build_template(template, labels, how, progress)?;
-    let t_template = t0.elapsed();
-    progress(&format!(
-        "template: skeleton from {} SOM-1 nodes, {} key points -> 30 rib points ({:.1} ms)",
-        tpl.graph.som1.len(),
-        tpl.graph.key_points.len(),
-        ms(t_template)
-    ));
-    register_prepared(
-        tpl,
-        template,
-        labels.is_some(),
-        target,
-        waypoints,
-        how,
-        t_template,
-        progress,
-    )
+    Ok(Mapped::from_clouds(template, labels, target, waypoints, how, progress)?.measure(progress))
 }
 
 /// [`register_clouds`] with the template already prepared (`tpl`, built from
@@ -341,91 +322,192 @@ pub fn register_prepared(
     t_template: std::time::Duration,
     progress: &mut dyn FnMut(&str),
 ) -> Result<RegisterOutcome, Error> {
-    let how = how.into();
-    let method = how.method;
-    let cfg = &how.config();
-    let t1 = Instant::now();
-    let reg = register(&tpl, target, cfg)?;
-    let t_register = t1.elapsed();
-    progress(&format!(
-        "target: {} points -> 30 rib points paired with the template's, rigid part {:.1}° ({:.1} ms)",
-        target.len(),
-        reg.pose.angle_deg(),
-        ms(t_register)
-    ));
-    let t2 = Instant::now();
-    let mut cache = Box::new(TransformCache::<HOST_CACHE>::new());
-    let mut registered = template.to_vec();
-    reg.map.map_in_place(&mut registered, &mut cache)?;
-    let mapped_wp = match waypoints {
-        Some(w) => {
-            let mut w = w.to_vec();
-            reg.map.map_in_place(&mut w, &mut cache)?;
-            Some(w)
+    Ok(Mapped::from_prepared(
+        tpl, template, labelled, target, waypoints, how, t_template, progress,
+    )?
+    .measure(progress))
+}
+
+/// A registration with the template's points and the waypoints mapped, before its
+/// metrics ([`Mapped::measure`]): `ribreg register` writes the mapped points while the
+/// metrics are measured.
+pub struct Mapped {
+    /// Registered template points (template order).
+    pub registered: Vec<Vec3>,
+    /// Mapped waypoints, if waypoints were given.
+    pub waypoints: Option<Vec<Vec3>>,
+    tpl: Box<Template>,
+    reg: Box<Registration>,
+    method: Method,
+    labelled: bool,
+    cache: Box<TransformCache<HOST_CACHE>>,
+    /// The target as the ED's k-d tree, built while the registration ran.
+    target_tree: KdTree<Vec<Vec3>>,
+    timings: [std::time::Duration; 3],
+}
+
+impl Mapped {
+    /// Prepares the template ([`build_template`]), then as [`Mapped::from_prepared`].
+    pub fn from_clouds(
+        template: &[Vec3],
+        labels: Option<&[u8]>,
+        target: &[Vec3],
+        waypoints: Option<&[Vec3]>,
+        how: impl Into<Options>,
+        progress: &mut dyn FnMut(&str),
+    ) -> Result<Self, Error> {
+        let how = how.into();
+        let t0 = Instant::now();
+        let tpl = build_template(template, labels, how, progress)?;
+        let t_template = t0.elapsed();
+        progress(&format!(
+            "template: skeleton from {} SOM-1 nodes, {} key points -> 30 rib points ({:.1} ms)",
+            tpl.graph.som1.len(),
+            tpl.graph.key_points.len(),
+            ms(t_template)
+        ));
+        Self::from_prepared(
+            tpl,
+            template,
+            labels.is_some(),
+            target,
+            waypoints,
+            how,
+            t_template,
+            progress,
+        )
+    }
+
+    /// Registers `target` to the prepared template `tpl` and maps `template`'s points
+    /// and the waypoints (see [`register_prepared`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn from_prepared(
+        tpl: Template,
+        template: &[Vec3],
+        labelled: bool,
+        target: &[Vec3],
+        waypoints: Option<&[Vec3]>,
+        how: impl Into<Options>,
+        t_template: std::time::Duration,
+        progress: &mut dyn FnMut(&str),
+    ) -> Result<Self, Error> {
+        let how = how.into();
+        let cfg = &how.config();
+        let t1 = Instant::now();
+        // The ED's k-d tree over the target is built on another core meanwhile.
+        let (reg, target_tree) = std::thread::scope(|s| {
+            let tree = s.spawn(|| KdTree::build(target.to_vec()));
+            let reg = register(&tpl, target, cfg);
+            (reg, joined(tree))
+        });
+        let reg = reg?;
+        let t_register = t1.elapsed();
+        progress(&format!(
+            "target: {} points -> 30 rib points paired with the template's, rigid part {:.1}° ({:.1} ms)",
+            target.len(),
+            reg.pose.angle_deg(),
+            ms(t_register)
+        ));
+        let t2 = Instant::now();
+        let mut cache = Box::new(TransformCache::<HOST_CACHE>::new());
+        let mut registered = template.to_vec();
+        reg.map.map_in_place(&mut registered, &mut cache)?;
+        let mapped_wp = match waypoints {
+            Some(w) => {
+                let mut w = w.to_vec();
+                reg.map.map_in_place(&mut w, &mut cache)?;
+                Some(w)
+            }
+            None => None,
+        };
+        let t_map = t2.elapsed();
+        progress(&format!(
+            "mapped {} points with {} local transforms ({:.1} ms)",
+            registered.len() + mapped_wp.as_ref().map_or(0, Vec::len),
+            cache.fits,
+            ms(t_map)
+        ));
+        Ok(Mapped {
+            registered,
+            waypoints: mapped_wp,
+            tpl: Box::new(tpl),
+            reg: Box::new(reg),
+            method: how.method,
+            labelled,
+            cache,
+            target_tree,
+            timings: [t_template, t_register, t_map],
+        })
+    }
+
+    /// ED / HD of the registered template against the target, and the report.
+    pub fn measure(self, progress: &mut dyn FnMut(&str)) -> RegisterOutcome {
+        let Mapped {
+            registered,
+            waypoints,
+            tpl,
+            reg,
+            method,
+            labelled,
+            cache,
+            target_tree,
+            timings: [t_template, t_register, t_map],
+        } = self;
+        let t3 = Instant::now();
+        let metrics = compare_on_two_threads(&registered, &target_tree);
+        let t_metrics = t3.elapsed();
+        progress(&format!(
+            "ED {:.2} ± {:.2} mm (max {:.2}), HD {:.2} mm ({:.1} ms)",
+            metrics.ed.mean,
+            metrics.ed.sd,
+            metrics.ed.max,
+            metrics.hausdorff,
+            ms(t_metrics)
+        ));
+        let report = json!({
+            "version": 1,
+            "method": method.name(),
+            "template": { "points": registered.len(), "labelled": labelled },
+            "target": { "points": target_tree.points().len() },
+            "skeleton": skeleton_json(&tpl, &reg),
+            "endpoint_match": {
+                "coarse_rms_mm": reg.matching.map(|m| m.coarse_rms),
+                "endpoint_rms_mm": reg.matching.map_or(0.0, |m| m.endpoint_rms),
+                "rotation_deg": reg.pose.angle_deg(),
+                "rotation": rows(&reg.pose.rotation),
+                "translation": reg.pose.translation.as_slice(),
+            },
+            "coverage": coverage_json(&tpl, &reg),
+            "pose_hypotheses": confidence_json(&reg),
+            "metrics": {
+                "ed_mean_mm": metrics.ed.mean,
+                "ed_sd_mm": metrics.ed.sd,
+                "ed_max_mm": metrics.ed.max,
+                "hausdorff_mm": metrics.hausdorff,
+            },
+            "mapping": {
+                "neighbourhoods": cache.len(),
+                "fits": cache.fits,
+                "cache_hits": cache.hits,
+                "cache_restarts": cache.restarts,
+                "waypoints": waypoints.as_ref().map_or(0, Vec::len),
+            },
+            "timings_ms": {
+                "template": ms(t_template),
+                "register": ms(t_register),
+                "map": ms(t_map),
+                "metrics": ms(t_metrics),
+            },
+        });
+        RegisterOutcome {
+            registered,
+            waypoints,
+            metrics,
+            report,
+            template: tpl,
+            registration: reg,
         }
-        None => None,
-    };
-    let t_map = t2.elapsed();
-    progress(&format!(
-        "mapped {} points with {} local transforms ({:.1} ms)",
-        registered.len() + mapped_wp.as_ref().map_or(0, Vec::len),
-        cache.fits,
-        ms(t_map)
-    ));
-    let t3 = Instant::now();
-    let metrics = compare_on_two_threads(&registered, target);
-    let t_metrics = t3.elapsed();
-    progress(&format!(
-        "ED {:.2} ± {:.2} mm (max {:.2}), HD {:.2} mm ({:.1} ms)",
-        metrics.ed.mean,
-        metrics.ed.sd,
-        metrics.ed.max,
-        metrics.hausdorff,
-        ms(t_metrics)
-    ));
-    let report = json!({
-        "version": 1,
-        "method": method.name(),
-        "template": { "points": template.len(), "labelled": labelled },
-        "target": { "points": target.len() },
-        "skeleton": skeleton_json(&tpl, &reg),
-        "endpoint_match": {
-            "coarse_rms_mm": reg.matching.map(|m| m.coarse_rms),
-            "endpoint_rms_mm": reg.matching.map_or(0.0, |m| m.endpoint_rms),
-            "rotation_deg": reg.pose.angle_deg(),
-            "rotation": rows(&reg.pose.rotation),
-            "translation": reg.pose.translation.as_slice(),
-        },
-        "coverage": coverage_json(&tpl, &reg),
-        "pose_hypotheses": confidence_json(&reg),
-        "metrics": {
-            "ed_mean_mm": metrics.ed.mean,
-            "ed_sd_mm": metrics.ed.sd,
-            "ed_max_mm": metrics.ed.max,
-            "hausdorff_mm": metrics.hausdorff,
-        },
-        "mapping": {
-            "neighbourhoods": cache.len(),
-            "fits": cache.fits,
-            "cache_hits": cache.hits,
-            "cache_restarts": cache.restarts,
-            "waypoints": mapped_wp.as_ref().map_or(0, Vec::len),
-        },
-        "timings_ms": {
-            "template": ms(t_template),
-            "register": ms(t_register),
-            "map": ms(t_map),
-            "metrics": ms(t_metrics),
-        },
-    });
-    Ok(RegisterOutcome {
-        registered,
-        waypoints: mapped_wp,
-        metrics,
-        report,
-        template: Box::new(tpl),
-        registration: Box::new(reg),
-    })
+    }
 }
 
 fn skeleton_json(tpl: &Template, reg: &Registration) -> Value {
@@ -496,12 +578,11 @@ fn confidence_json(reg: &Registration) -> Value {
 
 /// [`ribreg_core::registration::metrics::compare`]'s figures, its two directions on two
 /// threads.
-fn compare_on_two_threads(registered: &[Vec3], target: &[Vec3]) -> Metrics {
-    use ribreg_core::registration::metrics::{closest_distances, KdTree};
+fn compare_on_two_threads(registered: &[Vec3], target: &KdTree<Vec<Vec3>>) -> Metrics {
     std::thread::scope(|s| {
-        let back = s.spawn(|| closest_distances(target, &KdTree::build(&mut registered.to_vec())));
-        let ed = closest_distances(registered, &KdTree::build(&mut target.to_vec()));
-        Metrics::from_directed(ed, joined(back))
+        let ed = s.spawn(|| closest_distances(registered, target));
+        let back = closest_distances(target.points(), &KdTree::build(registered.to_vec()));
+        Metrics::from_directed(joined(ed), back)
     })
 }
 
@@ -617,13 +698,13 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
             "--target-up needs the improved method (the paper's has no pose hypotheses)".into(),
         ));
     }
-    let mut outcome = match prepared {
+    let mapped = match prepared {
         Some(prepared) => {
             progress(&format!(
                 "template: prepared, {} SOM-1 nodes -> 30 rib points",
                 prepared.graph.som1.len()
             ));
-            register_prepared(
+            Mapped::from_prepared(
                 prepared,
                 &tpl,
                 true,
@@ -634,26 +715,13 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
                 progress,
             )?
         }
-        None => register_clouds(&tpl, labels.as_deref(), &tgt, wps.as_deref(), how, progress)?,
+        None => Mapped::from_clouds(&tpl, labels.as_deref(), &tgt, wps.as_deref(), how, progress)?,
     };
-    let report_text = match &job.report {
-        Some(_) => {
-            outcome.report["files"] = json!({
-                "template": job.template, "target": job.target, "waypoints": job.waypoints,
-                "out": job.out, "out_waypoints": job.out_waypoints,
-            });
-            outcome.report["timings_ms"]["read"] = json!(ms(t_read));
-            outcome.report["timings_ms"]["total_before_write"] = json!(ms(t0.elapsed()));
-            Some(
-                serde_json::to_string_pretty(&outcome.report)
-                    .map_err(|e| CliError::Output(format!("report: {e}")))?,
-            )
-        }
-        None => None,
-    };
+    // The mapped points are written while the metrics are measured; the report, which
+    // holds them, follows.
     let t1 = Instant::now();
     let out = Cloud {
-        points: to_file(&outcome.registered),
+        points: to_file(&mapped.registered),
         labels: template.labels.clone(),
     };
     let format = if job.ascii {
@@ -665,7 +733,7 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
         &job.out,
         Box::new(move || io::write_ply(&job.out, &out, format)),
     )];
-    if let (Some(path), Some(w)) = (&job.out_waypoints, &outcome.waypoints) {
+    if let (Some(path), Some(w)) = (&job.out_waypoints, &mapped.waypoints) {
         let waypoints = io::Waypoints {
             points: to_file(w),
             labels: planned.map(|p| p.labels).unwrap_or_default(),
@@ -675,10 +743,22 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
             Box::new(move || io::write_waypoints(path, &waypoints)),
         ));
     }
-    if let (Some(path), Some(text)) = (&job.report, report_text) {
-        writes.push((path, Box::new(move || io::write_text(path, &text))));
-    }
-    io::write_all_or_none(writes)?;
+    let outcome = io::write_all_or_none(writes, || -> Result<_, CliError> {
+        let mut outcome = mapped.measure(progress);
+        let Some(path) = &job.report else {
+            return Ok((outcome, None));
+        };
+        outcome.report["files"] = json!({
+            "template": job.template, "target": job.target, "waypoints": job.waypoints,
+            "out": job.out, "out_waypoints": job.out_waypoints,
+        });
+        outcome.report["timings_ms"]["read"] = json!(ms(t_read));
+        outcome.report["timings_ms"]["total_before_write"] = json!(ms(t0.elapsed()));
+        let text = serde_json::to_string_pretty(&outcome.report)
+            .map_err(|e| CliError::Output(format!("report: {e}")))?;
+        let report: io::Output<'_> = (path, Box::new(move || io::write_text(path, &text)));
+        Ok((outcome, Some(report)))
+    })?;
     progress(&format!("wrote outputs ({:.1} ms)", ms(t1.elapsed())));
     Ok(outcome)
 }

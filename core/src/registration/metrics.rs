@@ -15,15 +15,16 @@ use crate::Vec3;
 /// one point).
 const LEAF: usize = 12;
 
-/// A k-d tree over a borrowed, reordered slice (median split, axes x, y, z by depth,
-/// leaves of up to `LEAF` points).
-pub struct KdTree<'a> {
-    points: &'a [Vec3],
+/// A k-d tree over points it reorders in place (median split, axes x, y, z by depth,
+/// leaves of up to `LEAF` points), held in `S`: a borrowed slice (`&mut [Vec3]`) or, on
+/// a host, an owned `Vec<Vec3>` that can be built on one thread and queried on another.
+pub struct KdTree<S> {
+    points: S,
 }
 
-impl<'a> KdTree<'a> {
+impl<S: AsMut<[Vec3]>> KdTree<S> {
     /// Builds the tree by reordering `points` in place.
-    pub fn build(points: &'a mut [Vec3]) -> Self {
+    pub fn build(mut points: S) -> Self {
         fn go(pts: &mut [Vec3], depth: usize) {
             if pts.len() <= LEAF {
                 return;
@@ -35,13 +36,15 @@ impl<'a> KdTree<'a> {
             go(left, depth + 1);
             go(&mut right[1..], depth + 1);
         }
-        go(points, 0);
+        go(points.as_mut(), 0);
         KdTree { points }
     }
+}
 
+impl<S: AsRef<[Vec3]>> KdTree<S> {
     /// The points, in tree order.
     pub fn points(&self) -> &[Vec3] {
-        self.points
+        self.points.as_ref()
     }
 
     /// Squared distance from `q` to the nearest point (`+∞` for an empty tree).
@@ -75,7 +78,7 @@ impl<'a> KdTree<'a> {
             }
         }
         let mut best = f32::INFINITY;
-        go(self.points, 0, q, &mut best);
+        go(self.points.as_ref(), 0, q, &mut best);
         best
     }
 }
@@ -94,7 +97,7 @@ pub struct DistanceStats {
 }
 
 /// Closest-point distances from each of `query` to the points of `tree`.
-pub fn closest_distances(query: &[Vec3], tree: &KdTree<'_>) -> DistanceStats {
+pub fn closest_distances<S: AsRef<[Vec3]>>(query: &[Vec3], tree: &KdTree<S>) -> DistanceStats {
     let (mut sum, mut sum_sq, mut max) = (0.0f64, 0.0f64, 0.0f32);
     for q in query {
         let d = libm::sqrtf(tree.nearest_sq(q));
@@ -179,7 +182,7 @@ mod tests {
         assert!((m.ed.sd - 0.5).abs() < 1e-6);
         assert_eq!(m.ed.max, 4.0);
         assert_eq!(m.hausdorff, 20.0);
-        let empty = KdTree::build(&mut []);
+        let empty = KdTree::build([]);
         assert_eq!(empty.nearest_sq(&Vec3::zeros()), f32::INFINITY);
     }
 }
