@@ -637,7 +637,19 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
         }
     }
     let t0 = Instant::now();
-    let (template, prepared): (Cloud, Option<Template>) = match read_template(&job.template)? {
+    // The target and the waypoints are read beside the template; the template's errors
+    // come first, as they would one after the other.
+    let (template_file, target, planned) = std::thread::scope(|s| {
+        let others = s.spawn(|| {
+            let target = io::read_cloud(&job.target);
+            let planned = job.waypoints.as_deref().map(io::read_waypoints);
+            (target, planned)
+        });
+        let template = read_template(&job.template);
+        let (target, planned) = joined(others);
+        (template, target, planned)
+    });
+    let (template, prepared): (Cloud, Option<Template>) = match template_file? {
         TemplateFile::Cloud(c) => (c, None),
         TemplateFile::Prepared(p) => {
             if job.method != Method::Improved {
@@ -652,12 +664,8 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
             (p.cloud, Some(tpl))
         }
     };
-    let target: Cloud = io::read_cloud(&job.target)?;
-    let planned = job
-        .waypoints
-        .as_deref()
-        .map(io::read_waypoints)
-        .transpose()?;
+    let target: Cloud = target?;
+    let planned = planned.transpose()?;
     let waypoints = planned.as_ref().map(|w| w.points.clone());
     let labels = to_core_labels(&job.template, &template.labels)?;
     let tpl = to_core(&template.points, Which::Template)?;
