@@ -731,14 +731,16 @@ pub(super) fn declares_element(bytes: &[u8], name: &str) -> bool {
 
 /// Decode every element of a PLY file (any element names), for files that carry more
 /// than a cloud or a mesh (ribreg's prepared templates). List properties are checked and
-/// skipped. Non-finite values are kept: the caller decides what a value means. Header
+/// skipped, and so are the rows of the elements named in `skip` (a caller that decodes
+/// the vertices with [`parse_ply`] skips `vertex`: one allocation a row is most of the
+/// decoding). Non-finite values are kept: the caller decides what a value means. Header
 /// counts never drive allocation beyond what the body could hold.
 ///
 /// # Errors
 ///
 /// The errors of [`parse_ply`] about the header and the body, except that no `vertex`
 /// element or property is required.
-pub fn parse_ply_elements(bytes: &[u8]) -> Result<Vec<PlyElement>, IoError> {
+pub fn parse_ply_elements(bytes: &[u8], skip: &[&str]) -> Result<Vec<PlyElement>, IoError> {
     let header = parse_header(bytes)?;
     let body_len = bytes.len().saturating_sub(header.body_start);
     let mut out: Vec<PlyElement> = header
@@ -752,23 +754,31 @@ pub fn parse_ply_elements(bytes: &[u8]) -> Result<Vec<PlyElement>, IoError> {
                 .filter(|p| matches!(p.ty, PropertyType::Scalar(_)))
                 .map(|p| p.name.clone())
                 .collect(),
-            rows: Vec::with_capacity(e.reserve_hint(header.format, body_len)),
+            rows: Vec::new(),
         })
         .collect();
-    let scalars: Vec<Vec<usize>> = header
+    // Rows to keep, per element: the indices of its scalar properties (`None`: skipped).
+    let scalars: Vec<Option<Vec<usize>>> = header
         .elements
         .iter()
-        .map(|e| {
-            e.properties
-                .iter()
-                .enumerate()
-                .filter(|(_, p)| matches!(p.ty, PropertyType::Scalar(_)))
-                .map(|(i, _)| i)
-                .collect()
+        .zip(&mut out)
+        .map(|(e, element)| {
+            if skip.contains(&e.name.as_str()) {
+                return None;
+            }
+            element.rows = Vec::with_capacity(e.reserve_hint(header.format, body_len));
+            Some(
+                e.properties
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, p)| matches!(p.ty, PropertyType::Scalar(_)))
+                    .map(|(i, _)| i)
+                    .collect(),
+            )
         })
         .collect();
     decode_body(&header, bytes, &mut |e, row| {
-        if let (Some(element), Some(scalars)) = (out.get_mut(e), scalars.get(e)) {
+        if let (Some(element), Some(Some(scalars))) = (out.get_mut(e), scalars.get(e)) {
             element
                 .rows
                 .push(scalars.iter().map(|&i| row.scalar(i)).collect());

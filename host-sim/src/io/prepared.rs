@@ -133,7 +133,8 @@ pub fn parse_template_file(bytes: &[u8]) -> Result<TemplateFile, IoError> {
     if !super::ply::declares_element(bytes, "ribreg_prepared") {
         return parse_ply(bytes).map(TemplateFile::Cloud);
     }
-    let elements = parse_ply_elements(bytes)?;
+    // The vertices are the cloud, which `parse_ply` decodes below.
+    let elements = parse_ply_elements(bytes, &["vertex"])?;
     let marker = element(&elements, "ribreg_prepared", &["version"], Some(1))?;
     let version = marker
         .property("version")

@@ -11,5 +11,6 @@ fuzz_target!(|bytes: &[u8]| {
             assert_eq!(l.len(), cloud.points.len());
         }
     }
-    let _ = io::parse_ply_elements(bytes);
+    let _ = io::parse_ply_elements(bytes, &[]);
+    let _ = io::parse_ply_elements(bytes, &["vertex"]);
 });
