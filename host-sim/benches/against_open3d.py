@@ -4,6 +4,7 @@ on the same phantom pair, measured in the same run (issue 14's speed goal: ours 
 quarter of Open3D's ICP).
 
     python3 host-sim/benches/against_open3d.py [path/to/ribreg] [--repeats 15] [--seeds 0 1 2]
+        [--before path/to/other/ribreg]
 
 `ribreg` defaults to target/release/ribreg (build it with `cargo build --release -p
 ribreg-sim`). Needs open3d (tests/fixtures/formats/requirements.txt pins the version).
@@ -14,7 +15,8 @@ every output). Open3D: the wall time of one `registration_icp` call alone (point
 point, identity start, 20 mm correspondence distance, at most 100 iterations), the
 clouds already in memory and no KD-tree reuse between calls. The two alternate, one of
 each per repeat; medians over the repeats; the ratio per seed and over all seeds is
-printed.
+printed. `--before` times a second `ribreg` (another version) in the same rotation, so
+that a change is measured against the version before it under the same load.
 """
 
 import argparse
@@ -37,16 +39,24 @@ def main() -> int:
     ap.add_argument("--spacing", type=float, default=None,
                     help="template from the phantom's CT labelmap (phantom --ct) at this spacing, mm, "
                          "instead of the phantom's 2.5 mm template cloud")
+    ap.add_argument("--before", default=None,
+                    help="another ribreg binary, timed in the same rotation (a version before a change)")
     args = ap.parse_args()
     ratios = []
     what = f"template from the CT labelmap at {args.spacing} mm" if args.spacing else "the phantom's template cloud"
     print(f"open3d {o3d.__version__}, ribreg {args.ribreg}, {args.repeats} repeats, {what}")
-    print("| seed | template / target points | ribreg register (whole process) | Open3D ICP call | ratio |")
-    print("|---|---|---|---|---|")
+    if args.before:
+        print(f"before: {args.before}")
+        print("| seed | template / target points | ribreg register (whole process) | before | Open3D ICP call | ratio | before |")
+        print("|---|---|---|---|---|---|---|")
+    else:
+        print("| seed | template / target points | ribreg register (whole process) | Open3D ICP call | ratio |")
+        print("|---|---|---|---|---|")
+    before_ratios = []
     for seed in args.seeds:
         with tempfile.TemporaryDirectory() as tmp:
             d = Path(tmp)
-            run = lambda *a: subprocess.run([args.ribreg, "-q", *a], check=True, capture_output=True)
+            run = lambda *a, exe=args.ribreg: subprocess.run([exe, "-q", *a], check=True, capture_output=True)
             run("phantom", "--seed", str(seed), "--variant", "misaligned", "--out-dir", str(d),
                 *(["--ct"] if args.spacing else []))
             if args.spacing:
@@ -67,11 +77,15 @@ def main() -> int:
             tgt = o3d.io.read_point_cloud(str(d / "target.ply"))
             # Interleaved, one of each per repeat, so that a slow spell of a shared machine
             # falls on both.
-            ours, theirs = [], []
+            ours, theirs, before = [], [], []
             for _ in range(args.repeats):
                 t = time.perf_counter()
                 run(*reg)
                 ours.append(time.perf_counter() - t)
+                if args.before:
+                    t = time.perf_counter()
+                    run(*reg, exe=args.before)
+                    before.append(time.perf_counter() - t)
                 t = time.perf_counter()
                 o3d.pipelines.registration.registration_icp(
                     src, tgt, 20.0, np.eye(4),
@@ -80,8 +94,16 @@ def main() -> int:
                 theirs.append(time.perf_counter() - t)
             a, b = statistics.median(ours), statistics.median(theirs)
             ratios.append(a / b)
-            print(f"| {seed} | {len(src.points)} / {len(tgt.points)} | {a * 1e3:.1f} ms | {b * 1e3:.1f} ms | {a / b:.2f} |")
+            if args.before:
+                c = statistics.median(before)
+                before_ratios.append(c / b)
+                print(f"| {seed} | {len(src.points)} / {len(tgt.points)} | {a * 1e3:.1f} ms | {c * 1e3:.1f} ms "
+                      f"| {b * 1e3:.1f} ms | {a / b:.2f} | {c / b:.2f} |")
+            else:
+                print(f"| {seed} | {len(src.points)} / {len(tgt.points)} | {a * 1e3:.1f} ms | {b * 1e3:.1f} ms | {a / b:.2f} |")
     print(f"median ratio ribreg / Open3D: {statistics.median(ratios):.2f}")
+    if args.before:
+        print(f"median ratio before / Open3D: {statistics.median(before_ratios):.2f}")
     return 0
 
 
