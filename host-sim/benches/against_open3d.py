@@ -16,7 +16,9 @@ point, identity start, 20 mm correspondence distance, at most 100 iterations), t
 clouds already in memory and no KD-tree reuse between calls. The two alternate, one of
 each per repeat; medians over the repeats; the ratio per seed and over all seeds is
 printed. `--before` times a second `ribreg` (another version) in the same rotation, so
-that a change is measured against the version before it under the same load.
+that a change is measured against the version before it under the same load, and
+prints the median of the paired ratios (this repeat's ours / this repeat's before);
+`--no-icp` leaves Open3D's call out (the second core then idles between the runs).
 """
 
 import argparse
@@ -41,14 +43,17 @@ def main() -> int:
                          "instead of the phantom's 2.5 mm template cloud")
     ap.add_argument("--before", default=None,
                     help="another ribreg binary, timed in the same rotation (a version before a change)")
+    ap.add_argument("--no-icp", action="store_true",
+                    help="time the ribregs only (with --before: a change against the version before it)")
     args = ap.parse_args()
     ratios = []
     what = f"template from the CT labelmap at {args.spacing} mm" if args.spacing else "the phantom's template cloud"
     print(f"open3d {o3d.__version__}, ribreg {args.ribreg}, {args.repeats} repeats, {what}")
     if args.before:
         print(f"before: {args.before}")
-        print("| seed | template / target points | ribreg register (whole process) | before | Open3D ICP call | ratio | before |")
-        print("|---|---|---|---|---|---|---|")
+        print("| seed | template / target points | ribreg register (whole process) | before | ours / before, paired "
+              "| Open3D ICP call | ratio | before |")
+        print("|---|---|---|---|---|---|---|---|")
     else:
         print("| seed | template / target points | ribreg register (whole process) | Open3D ICP call | ratio |")
         print("|---|---|---|---|---|")
@@ -78,27 +83,31 @@ def main() -> int:
             # Interleaved, one of each per repeat, so that a slow spell of a shared machine
             # falls on both.
             ours, theirs, before = [], [], []
-            for _ in range(args.repeats):
-                t = time.perf_counter()
-                run(*reg)
-                ours.append(time.perf_counter() - t)
-                if args.before:
+            timed = [(args.ribreg, ours)] + ([(args.before, before)] if args.before else [])
+            for repeat in range(args.repeats):
+                # The two ribregs take turns at running first after Open3D's call (whose
+                # OpenMP threads may still spin on the other core).
+                for exe, times in timed[::-1] if repeat % 2 else timed:
                     t = time.perf_counter()
-                    run(*reg, exe=args.before)
-                    before.append(time.perf_counter() - t)
+                    run(*reg, exe=exe)
+                    times.append(time.perf_counter() - t)
+                if args.no_icp:
+                    continue
                 t = time.perf_counter()
                 o3d.pipelines.registration.registration_icp(
                     src, tgt, 20.0, np.eye(4),
                     o3d.pipelines.registration.TransformationEstimationPointToPoint(),
                     o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=100))
                 theirs.append(time.perf_counter() - t)
-            a, b = statistics.median(ours), statistics.median(theirs)
+            a = statistics.median(ours)
+            b = statistics.median(theirs) if theirs else float("nan")
             ratios.append(a / b)
             if args.before:
                 c = statistics.median(before)
                 before_ratios.append(c / b)
+                paired = statistics.median(x / y for x, y in zip(ours, before))
                 print(f"| {seed} | {len(src.points)} / {len(tgt.points)} | {a * 1e3:.1f} ms | {c * 1e3:.1f} ms "
-                      f"| {b * 1e3:.1f} ms | {a / b:.2f} | {c / b:.2f} |")
+                      f"| {paired:.3f} | {b * 1e3:.1f} ms | {a / b:.2f} | {c / b:.2f} |")
             else:
                 print(f"| {seed} | {len(src.points)} / {len(tgt.points)} | {a * 1e3:.1f} ms | {b * 1e3:.1f} ms | {a / b:.2f} |")
     print(f"median ratio ribreg / Open3D: {statistics.median(ratios):.2f}")
