@@ -137,39 +137,68 @@ impl<const CAP: usize> KdTree<CAP> {
         if !self.ready(points) {
             return None;
         }
-        let mut best = (max_d2, usize::MAX);
-        self.search(points, q, 0, usize::from(self.len), &mut best);
-        (best.1 != usize::MAX).then_some((best.1, best.0))
-    }
-
-    fn search(&self, points: &[Vec3], q: &Vec3, lo: usize, hi: usize, best: &mut (f32, usize)) {
-        let mut consider = |i: usize| {
+        #[inline(always)]
+        fn consider(points: &[Vec3], q: &Vec3, i: usize, best: &mut (f32, usize)) {
             let d2 = (points[i] - q).norm_squared();
             if d2 < best.0 || (d2 == best.0 && i < best.1) {
                 *best = (d2, i);
             }
-        };
-        if hi - lo <= LEAF {
-            for &i in &self.order[lo..hi] {
-                consider(usize::from(i & INDEX_MASK));
-            }
-            return;
         }
-        let mid = lo + (hi - lo) / 2;
-        let (i, axis) = (
-            usize::from(self.order[mid] & INDEX_MASK),
-            usize::from(self.order[mid] >> 14),
-        );
-        consider(i);
-        let diff = q[axis] - points[i][axis];
-        let (near, far) = if diff < 0.0 {
-            ((lo, mid), (mid + 1, hi))
-        } else {
-            ((mid + 1, hi), (lo, mid))
-        };
-        self.search(points, q, near.0, near.1, best);
-        if diff * diff <= best.0 {
-            self.search(points, q, far.0, far.1, best);
+        let mut best = (max_d2, usize::MAX);
+        // Depth first, nearer side first, as a recursion would go, without its calls:
+        // the farther side of each split waits here with the squared distance from `q`
+        // to its splitting plane, and is searched only if that is within the best
+        // distance when its turn comes. One range waits per level of the current path,
+        // at most 12 for 2^14 points in leaves of `LEAF` (see `PENDING`).
+        let mut waiting = [(0u16, 0u16, 0.0f32); PENDING];
+        let mut depth = 0usize;
+        let (mut lo, mut hi) = (0usize, usize::from(self.len));
+        loop {
+            if hi - lo > LEAF {
+                let mid = lo + (hi - lo) / 2;
+                let (i, axis) = (
+                    usize::from(self.order[mid] & INDEX_MASK),
+                    usize::from(self.order[mid] >> 14),
+                );
+                consider(points, q, i, &mut best);
+                let diff = q[axis] - points[i][axis];
+                let (near, far) = if diff < 0.0 {
+                    ((lo, mid), (mid + 1, hi))
+                } else {
+                    ((mid + 1, hi), (lo, mid))
+                };
+                match waiting.get_mut(depth) {
+                    // Note: ranges are under 2^14 (`MAX_CAPACITY`), so they fit a u16.
+                    Some(slot) => {
+                        *slot = (far.0 as u16, far.1 as u16, diff * diff);
+                        depth += 1;
+                    }
+                    // Deeper than a tree can be; scanning the farther side in full
+                    // keeps the answer exact (it does not depend on the visiting order).
+                    None => {
+                        for &o in &self.order[far.0..far.1] {
+                            consider(points, q, usize::from(o & INDEX_MASK), &mut best);
+                        }
+                    }
+                }
+                (lo, hi) = near;
+                continue;
+            }
+            for &o in &self.order[lo..hi] {
+                consider(points, q, usize::from(o & INDEX_MASK), &mut best);
+            }
+            // The next waiting range still within the best distance.
+            loop {
+                let Some(d) = depth.checked_sub(1) else {
+                    return (best.1 != usize::MAX).then_some((best.1, best.0));
+                };
+                depth = d;
+                let (l, h, plane_d2) = waiting.get(d).copied().unwrap_or_default();
+                if plane_d2 <= best.0 {
+                    (lo, hi) = (usize::from(l), usize::from(h));
+                    break;
+                }
+            }
         }
     }
 }
