@@ -304,28 +304,32 @@ pub fn register_clouds(
     how: impl Into<Options>,
     progress: &mut dyn FnMut(&str),
 ) -> Result<RegisterOutcome, Error> {
-    Ok(Mapped::from_clouds(template, labels, target, waypoints, how, progress)?.measure(progress))
+    let how = how.into();
+    let (tpl, t_template) = prepare_template(template, labels, how, progress)?;
+    let labelled = labels.is_some();
+    let mapped = Mapped::from_prepared(
+        tpl, template, labelled, target, waypoints, how, t_template, progress,
+    )?;
+    Ok(mapped.measure(progress))
 }
 
-/// [`register_clouds`] with the template already prepared (`tpl`, built from
-/// `template` by [`build_template`] or read from a prepared file): registers, maps the
-/// template's points and the waypoints, and measures. `t_template` is what preparing
-/// took (zero when read), for the report.
-#[allow(clippy::too_many_arguments)]
-pub fn register_prepared(
-    tpl: Template,
+/// [`build_template`], timed, with its progress line.
+fn prepare_template(
     template: &[Vec3],
-    labelled: bool,
-    target: &[Vec3],
-    waypoints: Option<&[Vec3]>,
-    how: impl Into<Options>,
-    t_template: std::time::Duration,
+    labels: Option<&[u8]>,
+    how: Options,
     progress: &mut dyn FnMut(&str),
-) -> Result<RegisterOutcome, Error> {
-    Ok(Mapped::from_prepared(
-        tpl, template, labelled, target, waypoints, how, t_template, progress,
-    )?
-    .measure(progress))
+) -> Result<(Template, std::time::Duration), Error> {
+    let t0 = Instant::now();
+    let tpl = build_template(template, labels, how, progress)?;
+    let t_template = t0.elapsed();
+    progress(&format!(
+        "template: skeleton from {} SOM-1 nodes, {} key points -> 30 rib points ({:.1} ms)",
+        tpl.graph.som1.len(),
+        tpl.graph.key_points.len(),
+        ms(t_template)
+    ));
+    Ok((tpl, t_template))
 }
 
 /// A registration with the template's points and the waypoints mapped, before its
@@ -347,39 +351,10 @@ pub struct Mapped {
 }
 
 impl Mapped {
-    /// Prepares the template ([`build_template`]), then as [`Mapped::from_prepared`].
-    pub fn from_clouds(
-        template: &[Vec3],
-        labels: Option<&[u8]>,
-        target: &[Vec3],
-        waypoints: Option<&[Vec3]>,
-        how: impl Into<Options>,
-        progress: &mut dyn FnMut(&str),
-    ) -> Result<Self, Error> {
-        let how = how.into();
-        let t0 = Instant::now();
-        let tpl = build_template(template, labels, how, progress)?;
-        let t_template = t0.elapsed();
-        progress(&format!(
-            "template: skeleton from {} SOM-1 nodes, {} key points -> 30 rib points ({:.1} ms)",
-            tpl.graph.som1.len(),
-            tpl.graph.key_points.len(),
-            ms(t_template)
-        ));
-        Self::from_prepared(
-            tpl,
-            template,
-            labels.is_some(),
-            target,
-            waypoints,
-            how,
-            t_template,
-            progress,
-        )
-    }
-
-    /// Registers `target` to the prepared template `tpl` and maps `template`'s points
-    /// and the waypoints (see [`register_prepared`]).
+    /// Registers `target` to the template already prepared (`tpl`, built from
+    /// `template` by [`build_template`] or read from a prepared file), and maps the
+    /// template's points and the waypoints. `t_template` is what preparing took (zero
+    /// when read), for the report.
     #[allow(clippy::too_many_arguments)]
     pub fn from_prepared(
         tpl: Template,
@@ -723,7 +698,20 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
                 progress,
             )?
         }
-        None => Mapped::from_clouds(&tpl, labels.as_deref(), &tgt, wps.as_deref(), how, progress)?,
+        None => {
+            let (prepared, t_template) = prepare_template(&tpl, labels.as_deref(), how, progress)?;
+            let labelled = labels.is_some();
+            Mapped::from_prepared(
+                prepared,
+                &tpl,
+                labelled,
+                &tgt,
+                wps.as_deref(),
+                how,
+                t_template,
+                progress,
+            )?
+        }
     };
     // The mapped points are written while the metrics are measured; the report, which
     // holds them, follows.

@@ -6,7 +6,7 @@
 //!   `asarray` casts to float64; the core computes in f32, as the CLI does). Results are
 //!   new C-ordered float64 arrays.
 //! * Same numbers as the CLI: every call goes through the functions `ribreg register`
-//!   uses ([`register_clouds`], [`register_prepared`]), so the registered points and
+//!   uses ([`register_clouds`], [`Mapped::from_prepared`]), so the registered points and
 //!   mapped waypoints equal the CLI's output files (tested to 1e-6 mm in
 //!   `host-sim/python/tests/test_register.py`).
 //! * The interpreter is released (`Python::detach`) while a template is prepared, a
@@ -28,7 +28,7 @@ use ribreg_core::Vec3;
 use ribreg_sim::io::prepared::TemplateFile;
 use ribreg_sim::io::{self, Cloud, IoError};
 use ribreg_sim::register::{
-    build_template, register_clouds, register_prepared, to_core, to_file, Method, HOST_CACHE,
+    build_template, register_clouds, to_core, to_file, Mapped, Method, HOST_CACHE,
 };
 use std::path::PathBuf;
 use std::time::Duration;
@@ -358,7 +358,7 @@ fn register(
         Some(p) => {
             let (core, points) = (p.core.clone(), &p.points);
             py.detach(|| {
-                register_prepared(
+                Mapped::from_prepared(
                     core,
                     points,
                     true,
@@ -368,6 +368,7 @@ fn register(
                     Duration::ZERO,
                     &mut |_| {},
                 )
+                .map(|mapped| mapped.measure(&mut |_| {}))
             })
         }
         None => {
