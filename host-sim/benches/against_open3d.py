@@ -51,12 +51,12 @@ def main() -> int:
     print(f"open3d {o3d.__version__}, ribreg {args.ribreg}, {args.repeats} repeats, {what}")
     if args.before:
         print(f"before: {args.before}")
-        print("| seed | template / target points | ribreg register (whole process) | before | ours / before, paired "
-              "| Open3D ICP call | ratio | before |")
-        print("|---|---|---|---|---|---|---|---|")
-    else:
-        print("| seed | template / target points | ribreg register (whole process) | Open3D ICP call | ratio |")
-        print("|---|---|---|---|---|")
+    header = ["seed", "template / target points", "ribreg register (whole process)"]
+    header += ["before", "ours / before, paired"] if args.before else []
+    header += [] if args.no_icp else ["Open3D ICP call", "ratio"] + (["before"] if args.before else [])
+    print("| " + " | ".join(header) + " |")
+    print("|" + "---|" * len(header))
+    paired_ratios = []
     before_ratios = []
     for seed in args.seeds:
         with tempfile.TemporaryDirectory() as tmp:
@@ -100,19 +100,25 @@ def main() -> int:
                     o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=100))
                 theirs.append(time.perf_counter() - t)
             a = statistics.median(ours)
-            b = statistics.median(theirs) if theirs else float("nan")
-            ratios.append(a / b)
+            row = [str(seed), f"{len(src.points)} / {len(tgt.points)}", f"{a * 1e3:.1f} ms"]
             if args.before:
                 c = statistics.median(before)
-                before_ratios.append(c / b)
-                paired = statistics.median(x / y for x, y in zip(ours, before))
-                print(f"| {seed} | {len(src.points)} / {len(tgt.points)} | {a * 1e3:.1f} ms | {c * 1e3:.1f} ms "
-                      f"| {paired:.3f} | {b * 1e3:.1f} ms | {a / b:.2f} | {c / b:.2f} |")
-            else:
-                print(f"| {seed} | {len(src.points)} / {len(tgt.points)} | {a * 1e3:.1f} ms | {b * 1e3:.1f} ms | {a / b:.2f} |")
-    print(f"median ratio ribreg / Open3D: {statistics.median(ratios):.2f}")
-    if args.before:
+                paired_ratios.append(statistics.median(x / y for x, y in zip(ours, before)))
+                row += [f"{c * 1e3:.1f} ms", f"{paired_ratios[-1]:.3f}"]
+            if not args.no_icp:
+                b = statistics.median(theirs)
+                ratios.append(a / b)
+                row += [f"{b * 1e3:.1f} ms", f"{a / b:.2f}"]
+                if args.before:
+                    before_ratios.append(c / b)
+                    row.append(f"{c / b:.2f}")
+            print("| " + " | ".join(row) + " |")
+    if ratios:
+        print(f"median ratio ribreg / Open3D: {statistics.median(ratios):.2f}")
+    if before_ratios:
         print(f"median ratio before / Open3D: {statistics.median(before_ratios):.2f}")
+    if paired_ratios:
+        print(f"median paired ratio ribreg / before: {statistics.median(paired_ratios):.3f}")
     return 0
 
 
