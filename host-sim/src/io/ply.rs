@@ -935,6 +935,29 @@ mod tests {
         header_and_body.as_bytes().to_vec()
     }
 
+    /// Every element is decoded, but for those named in `skip`: their header stays, their
+    /// rows are left out, and the elements after them are still read where they are.
+    #[test]
+    fn elements_are_decoded_but_for_those_skipped() {
+        let bytes = ascii(
+            "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n\
+             property float z\nelement node 1\nproperty int label\n\
+             property list uchar int idx\nproperty double w\nend_header\n\
+             1 2 3\n4 5 6\n7 2 8 9 0.5\n",
+        );
+        let all = parse_ply_elements(&bytes, &[]).unwrap();
+        assert_eq!(all[0].rows, [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]);
+        assert_eq!(all[1].properties, ["label", "w"]);
+        assert_eq!(all[1].rows, [[7.0, 0.5]]);
+        let some = parse_ply_elements(&bytes, &["vertex"]).unwrap();
+        assert_eq!(
+            (some[0].name.as_str(), some[0].properties.len()),
+            ("vertex", 3)
+        );
+        assert!(some[0].rows.is_empty());
+        assert_eq!(some[1], all[1]);
+    }
+
     #[test]
     fn round_trip_all_formats_with_and_without_labels() {
         let dir = tempfile::tempdir().unwrap();
