@@ -1493,6 +1493,84 @@ pub fn rib_skeleton(
 }
 
 // ---------------------------------------------------------------------------------------
+// Thin-plate spline
+// ---------------------------------------------------------------------------------------
+
+/// The 3-D thin-plate spline through paired points, in `f64` and in the textbook form:
+/// `f(p) = a₀ + A p + Σ wᵢ ‖p − sᵢ‖` with `[K P; Pᵀ 0][w; a] = [t; 0]`, solved on the raw
+/// coordinates (no centring or scaling) by Gaussian elimination with partial pivoting.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ThinPlate {
+    /// Source points.
+    pub source: Vec<P3>,
+    /// One row per unknown (weights, then constant and the three linear columns), per
+    /// output coordinate.
+    pub coef: Vec<P3>,
+}
+
+impl ThinPlate {
+    /// The spline through `source[i] → target[i]`; `None` if the system is singular.
+    pub fn fit(source: &[P3], target: &[P3]) -> Option<ThinPlate> {
+        let n = source.len();
+        let m = n + 4;
+        let mut a = vec![vec![0.0f64; m + 3]; m];
+        for i in 0..n {
+            for j in 0..n {
+                a[i][j] = dist(source[i], source[j]);
+            }
+            a[i][n] = 1.0;
+            a[n][i] = 1.0;
+            for k in 0..3 {
+                a[i][n + 1 + k] = source[i][k];
+                a[n + 1 + k][i] = source[i][k];
+                a[i][m + k] = target[i][k];
+            }
+        }
+        for col in 0..m {
+            let piv = (col..m).max_by(|&x, &y| a[x][col].abs().total_cmp(&a[y][col].abs()))?;
+            if a[piv][col].abs() < 1e-12 {
+                return None;
+            }
+            a.swap(col, piv);
+            for r in col + 1..m {
+                let f = a[r][col] / a[col][col];
+                for k in col..m + 3 {
+                    a[r][k] -= f * a[col][k];
+                }
+            }
+        }
+        let mut coef = vec![[0.0; 3]; m];
+        for col in (0..m).rev() {
+            for k in 0..3 {
+                let mut v = a[col][m + k];
+                for j in col + 1..m {
+                    v -= a[col][j] * coef[j][k];
+                }
+                coef[col][k] = v / a[col][col];
+            }
+        }
+        Some(ThinPlate {
+            source: source.to_vec(),
+            coef,
+        })
+    }
+
+    /// Where the spline takes `p`.
+    pub fn apply(&self, p: P3) -> P3 {
+        let n = self.source.len();
+        let mut out = [0.0; 3];
+        for (k, o) in out.iter_mut().enumerate() {
+            *o = self.coef[n][k]
+                + (0..3).map(|d| self.coef[n + 1 + d][k] * p[d]).sum::<f64>()
+                + (0..n)
+                    .map(|i| self.coef[i][k] * dist(p, self.source[i]))
+                    .sum::<f64>();
+        }
+        out
+    }
+}
+
+// ---------------------------------------------------------------------------------------
 // Local rigid mapping
 // ---------------------------------------------------------------------------------------
 

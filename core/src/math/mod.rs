@@ -16,3 +16,4 @@ pub mod kdtree;
 pub mod mst;
 pub mod rng;
 pub mod som;
+pub mod spline;
