@@ -44,6 +44,9 @@ pub struct Config {
     /// template, than every other rib side
     /// ([`crate::registration::guided::lengthen_short`]). The paper has no such step.
     pub lengthen_short_ribs: bool,
+    /// How points are carried from the template onto the target once the skeletons are
+    /// paired (improvement option; paper: [`Mapping::LocalRigid`]).
+    pub mapping: Mapping,
 }
 
 impl Default for Config {
@@ -56,6 +59,7 @@ impl Default for Config {
             rib_model: RibModel::Graph,
             target_up: None,
             lengthen_short_ribs: false,
+            mapping: Mapping::LocalRigid,
         }
     }
 }
@@ -68,6 +72,7 @@ impl Config {
         Config {
             rib_model: RibModel::Guided,
             lengthen_short_ribs: true,
+            mapping: Mapping::ThinPlate,
             ..Config::default()
         }
     }
@@ -81,6 +86,19 @@ pub enum RibModel {
     /// Improvement: ribs from the labelled template's SOM-1 nodes, carried onto the
     /// target (see [`crate::registration::guided`]). Needs a labelled template.
     Guided,
+}
+
+/// How a registration maps points once the 30 skeleton points are paired.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mapping {
+    /// The paper (Eq. 6): each point by the rigid transform of its `N_r` nearest skeleton
+    /// pairs ([`crate::registration::local_rigid`]).
+    LocalRigid,
+    /// Improvement: the thin-plate spline through all 30 pairs
+    /// ([`crate::math::spline::ThinPlate`]): smooth, exact at the skeleton, and it
+    /// stretches where the patient's cartilage is longer than the template's, which a
+    /// rigid transform per neighbourhood cannot (see the README's evaluation).
+    ThinPlate,
 }
 
 /// Grid and training schedule of one SOM.

@@ -57,7 +57,7 @@
 //! let template = Template::build(&ct, None, &cfg)?;
 //! let reg = register(&template, &us, &cfg)?;
 //! let mut waypoint = [Vec3::new(20.0, -15.0, 5.0)];
-//! reg.map.map_in_place(&mut waypoint, &mut TransformCache::<128>::new())?;
+//! reg.map_in_place(&mut waypoint, &mut TransformCache::<128>::new())?;
 //! assert!((waypoint[0] - Vec3::new(23.0, -17.0, 15.0)).norm() < 1.0);
 //! # Ok::<(), ribreg_core::Error>(())
 //! ```

@@ -58,16 +58,20 @@ pub enum Ablation {
     /// Lengthening a rib side the target shows shorter than every other
     /// (`Config::lengthen_short_ribs`): the rib extents as observed.
     LengthenShortRibs,
+    /// The thin-plate spline mapping (`Config::mapping`): each point by the local rigid
+    /// transform of its skeleton neighbourhood, as in the paper.
+    ThinPlate,
 }
 
 impl Ablation {
     /// Every step an ablation row can leave out.
-    pub const ALL: [Ablation; 1] = [Ablation::LengthenShortRibs];
+    pub const ALL: [Ablation; 2] = [Ablation::LengthenShortRibs, Ablation::ThinPlate];
 
     /// What is left out, in a table row's name.
     pub fn name(self) -> &'static str {
         match self {
             Ablation::LengthenShortRibs => "short ribs lengthened",
+            Ablation::ThinPlate => "thin-plate mapping",
         }
     }
 
@@ -75,6 +79,7 @@ impl Ablation {
     fn remove(self, cfg: &mut Config) {
         match self {
             Ablation::LengthenShortRibs => cfg.lengthen_short_ribs = false,
+            Ablation::ThinPlate => cfg.mapping = ribreg_core::config::Mapping::LocalRigid,
         }
     }
 }
@@ -386,20 +391,23 @@ impl Mapped {
         let t2 = Instant::now();
         let mut cache = Box::new(TransformCache::<HOST_CACHE>::new());
         let mut registered = template.to_vec();
-        reg.map.map_in_place(&mut registered, &mut cache)?;
+        reg.map_in_place(&mut registered, &mut cache)?;
         let mapped_wp = match waypoints {
             Some(w) => {
                 let mut w = w.to_vec();
-                reg.map.map_in_place(&mut w, &mut cache)?;
+                reg.map_in_place(&mut w, &mut cache)?;
                 Some(w)
             }
             None => None,
         };
         let t_map = t2.elapsed();
+        let by = match reg.spline {
+            Some(_) => "the thin-plate spline of the 30 pairs".to_string(),
+            None => format!("{} local transforms", cache.fits),
+        };
         progress(&format!(
-            "mapped {} points with {} local transforms ({:.1} ms)",
+            "mapped {} points with {by} ({:.1} ms)",
             registered.len() + mapped_wp.as_ref().map_or(0, Vec::len),
-            cache.fits,
             ms(t_map)
         ));
         Ok(Mapped {
@@ -461,6 +469,7 @@ impl Mapped {
                 "hausdorff_mm": metrics.hausdorff,
             },
             "mapping": {
+                "by": if reg.spline.is_some() { "thin_plate_spline" } else { "local_rigid" },
                 "neighbourhoods": cache.len(),
                 "fits": cache.fits,
                 "cache_hits": cache.hits,

@@ -24,7 +24,9 @@ pub struct ProbeTarget {
     /// TCP pose: on the skin side at the configured standoff, beam along the inward
     /// surface normal.
     pub tcp: Rigid,
-    /// Quality: RMS residual of the local rigid fit that mapped the waypoint, mm.
+    /// Quality: RMS residual of the rigid fit over the waypoint's skeleton neighbourhood
+    /// (how far the skeleton around it is from moving rigidly), mm; the waypoint itself
+    /// is mapped by [`Registration::carry`].
     pub quality_mm: f32,
 }
 
@@ -48,7 +50,7 @@ pub(super) fn target(
         Vec3::zeros()
     };
     let quality_mm = reg.map.residual(&t, mask);
-    let p = t.apply(w);
+    let p = reg.carry(w, &t);
     let tcp = probe_pose(cloud, &p, &skin, s.standoff);
     Ok(ProbeTarget {
         waypoint: p,

@@ -1,15 +1,16 @@
 //! The whole registration: template preparation, target skeleton, endpoint matching and
-//! the local-rigid mapping.
+//! the mapping (local rigid, or the thin-plate spline of [`Mapping::ThinPlate`]).
 
-use crate::config::{Config, RibModel};
+use crate::config::{Config, Mapping, RibModel};
 use crate::error::{Cloud, Error, Result};
 use crate::limits::{MAX_CLOUD_POINTS, MIN_CLOUD_POINTS};
 use crate::math::geom::{nearest, validate, validate_count, validate_points, Frame, Rigid};
+use crate::math::spline::{ThinPlate, ThinPlateFit};
 use crate::registration::endpoints::{match_endpoints, EndpointMatch};
 use crate::registration::guided::{
     check_coverage, fit_ribs, label_nodes, GuidedStage, NodeLabels, PoseConfidence, TargetSkeleton,
 };
-use crate::registration::local_rigid::LocalRigid;
+use crate::registration::local_rigid::{LocalRigid, TransformCache};
 use crate::registration::skeleton::{GraphBuild, RibEnds, RibSkeleton, SkeletonGraph};
 use crate::Vec3;
 
@@ -164,15 +165,51 @@ pub struct Registration {
     pub matching: Option<EndpointMatch>,
     /// The target's 30 skeleton points, paired with the template's.
     pub skeleton: RibSkeleton,
-    /// The mapping template → target.
+    /// The paper's mapping template → target (Eq. 6); with [`Mapping::ThinPlate`] it
+    /// still gives each waypoint its quality figure ([`LocalRigid::residual`]).
     pub map: LocalRigid,
+    /// With [`Mapping::ThinPlate`]: the spline through the paired skeletons, which then
+    /// maps the points ([`Registration::map_in_place`]).
+    pub spline: Option<ThinPlate>,
     /// Guided model: how clearly the pose hypotheses picked the pose (`None` for the
     /// graph model).
     pub confidence: Option<PoseConfidence>,
 }
 
+impl Registration {
+    /// Where the registration takes template point `p`: by [`Registration::spline`]
+    /// when there is one, else by the local rigid transform of `p`'s neighbourhood
+    /// (`t`, from [`LocalRigid::transform_for`] or its bounded steps).
+    pub fn carry(&self, p: &Vec3, t: &Rigid) -> Vec3 {
+        match &self.spline {
+            Some(s) => s.apply(p),
+            None => t.apply(p),
+        }
+    }
+
+    /// Maps template points in place (any number: nothing is buffered), by the
+    /// configuration's [`Mapping`]. All points are checked first, so on bad input
+    /// nothing is changed.
+    pub fn map_in_place<const CAP: usize>(
+        &self,
+        points: &mut [Vec3],
+        cache: &mut TransformCache<CAP>,
+    ) -> Result<()> {
+        match &self.spline {
+            Some(s) => {
+                validate(points, Cloud::Query, 0, usize::MAX)?;
+                for p in points {
+                    *p = s.apply(p);
+                }
+                Ok(())
+            }
+            None => self.map.map_in_place(points, cache),
+        }
+    }
+}
+
 /// Registers `template` onto the `target` cloud (any pose: no initial alignment needed).
-/// Map points through the result with [`LocalRigid::map_in_place`] on `.map`.
+/// Map points through the result with [`Registration::map_in_place`].
 pub fn register(template: &Template, target: &[Vec3], cfg: &Config) -> Result<Registration> {
     let mut r = Registering::start(target, cfg)?;
     while !r.step(template, target, cfg, u32::MAX)? {}
@@ -197,6 +234,8 @@ pub const CHECK_POINTS_PER_UNIT: usize = 128;
 #[derive(Clone)]
 pub struct Registering {
     stage: Stage,
+    /// With [`Mapping::ThinPlate`]: the spline's system is set up by the next step.
+    spline_next: bool,
 }
 
 // The stages are exclusive and live once per registration: boxing is not an option
@@ -210,7 +249,10 @@ enum Stage {
     Axes,
     Graph(GraphBuild),
     Guided(SkeletonGraph, TargetSkeleton),
-    Done(Registration),
+    /// The registration; with [`Mapping::ThinPlate`] its spline is solved in the
+    /// second field, in place, before it is done (the variant stays smaller than
+    /// `Guided`, so the spline adds nothing to the registration's state).
+    Done(Registration, ThinPlateFit),
     Failed,
 }
 
@@ -227,6 +269,7 @@ impl Registering {
         )?;
         Ok(Registering {
             stage: Stage::Check(0),
+            spline_next: false,
         })
     }
 
@@ -245,8 +288,9 @@ impl Registering {
     /// What the next step works on: `"check"` (the target's points), `"axes"` (its
     /// principal axes and initial SOM 1), the skeleton graph's stage ([`GraphBuild::stage`]),
     /// then for the guided model
-    /// `"index"`, `"coarse"`, `"refine"`, `"label"`, `"fit"`, `"solve"`, `"refit"`, `"carry"`, and
-    /// `"done"` (or `"failed"`). For cost reports.
+    /// `"index"`, `"coarse"`, `"refine"`, `"label"`, `"fit"`, `"solve"`, `"refit"`, `"carry"`,
+    /// then `"spline"` ([`Mapping::ThinPlate`]) and `"done"` (or `"failed"`). For cost
+    /// reports.
     pub fn stage(&self) -> &'static str {
         match &self.stage {
             Stage::Check(_) => "check",
@@ -263,7 +307,8 @@ impl Registering {
                 GuidedStage::Carry(_) => "carry",
                 GuidedStage::Done => "map",
             },
-            Stage::Done(_) => "done",
+            Stage::Done(_, fit) if self.spline_next || fit.solving() => "spline",
+            Stage::Done(..) => "done",
             Stage::Failed => "failed",
         }
     }
@@ -335,9 +380,24 @@ impl Registering {
                     return Ok(false);
                 }
                 self.guided_done(template, cfg)?;
+                Ok(!self.spline_next)
+            }
+            Stage::Done(reg, fit) => {
+                if self.spline_next {
+                    self.spline_next = false;
+                    fit.start(&template.skeleton.points, &reg.skeleton.points)?;
+                    return Ok(false);
+                }
+                if !fit.solving() {
+                    return Ok(true);
+                }
+                let columns = (budget as usize).saturating_mul(SPLINE_COLUMNS_PER_UNIT);
+                let Some(spline) = fit.step(columns)? else {
+                    return Ok(false);
+                };
+                reg.spline = Some(spline);
                 Ok(true)
             }
-            Stage::Done(_) => Ok(true),
             Stage::Failed => Err(Error::Config("the registration failed before")),
         }
     }
@@ -364,7 +424,7 @@ impl Registering {
             return Ok(false);
         }
         self.finish_graph(graph, template, cfg)?;
-        Ok(true)
+        Ok(!self.spline_next)
     }
 
     /// The guided stage starts on `graph`. A function of its own, like
@@ -395,7 +455,9 @@ impl Registering {
         cfg: &Config,
     ) -> Result<()> {
         let (pose, matching, skeleton) = graph_skeleton(template, &graph, cfg)?;
-        self.stage = Stage::Done(finish(template, graph, pose, matching, skeleton, cfg)?);
+        let registration = finish(template, graph, pose, matching, skeleton, cfg)?;
+        self.spline_next = cfg.mapping == Mapping::ThinPlate;
+        self.stage = Stage::Done(registration, ThinPlateFit::IDLE);
         Ok(())
     }
 
@@ -427,14 +489,15 @@ impl Registering {
         let graph = core::mem::replace(graph, SkeletonGraph::empty());
         let mut registration = finish(template, graph, pose, None, skeleton, cfg)?;
         registration.confidence = confidence;
-        self.stage = Stage::Done(registration);
+        self.spline_next = cfg.mapping == Mapping::ThinPlate;
+        self.stage = Stage::Done(registration, ThinPlateFit::IDLE);
         Ok(())
     }
 
     /// The registration, once done.
     pub fn registration(&self) -> Option<&Registration> {
         match &self.stage {
-            Stage::Done(r) => Some(r),
+            Stage::Done(r, fit) if !self.spline_next && !fit.solving() => Some(r),
             _ => None,
         }
     }
@@ -442,7 +505,7 @@ impl Registering {
     /// The registration, once done.
     pub fn into_registration(self) -> Option<Registration> {
         match self.stage {
-            Stage::Done(r) => Some(r),
+            Stage::Done(r, fit) if !self.spline_next && !fit.solving() => Some(r),
             _ => None,
         }
     }
@@ -467,7 +530,13 @@ fn graph_skeleton(
     }
 }
 
-/// The mapping template → target from the paired skeletons.
+/// Columns of the thin-plate spline's system eliminated per unit of
+/// [`Registering::step`]'s budget: a column is at most 34 · 37 multiply-adds, about a
+/// SOM iteration's work.
+pub const SPLINE_COLUMNS_PER_UNIT: usize = 1;
+
+/// The mapping template → target from the paired skeletons (the spline, if any, is
+/// solved after).
 fn finish(
     template: &Template,
     graph: SkeletonGraph,
@@ -483,6 +552,7 @@ fn finish(
         matching,
         skeleton,
         map,
+        spline: None,
         confidence: None,
     })
 }

@@ -261,10 +261,10 @@ impl Registration {
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let pts = rows(&points, "points")?;
         let mut pts = to_core(&pts, Which::Query).map_err(value_err)?;
-        let map = &self.registration.map;
+        let reg = &self.registration;
         py.detach(|| {
             let mut cache = Box::new(TransformCache::<HOST_CACHE>::new());
-            map.map_in_place(&mut pts, &mut cache)
+            reg.map_in_place(&mut pts, &mut cache)
         })
         .map_err(value_err)?;
         Ok(to_array(py, &to_file(&pts)))
