@@ -19,6 +19,11 @@ pub const SOM1_CAPACITY: usize = 400;
 pub const KEY_POINTS: usize = 128;
 /// Paired skeleton points: 6 + 6 + 8 + 10.
 pub const SKELETON_POINTS: usize = 30;
+/// Points on the sternum's midline paired between template and target (guided model):
+/// the manubrium's top, the xiphoid's tip and two between.
+pub const STERNUM_STATIONS: usize = 4;
+/// Most point pairs a thin-plate spline takes: the skeleton and the sternum stations.
+pub const SPLINE_POINTS: usize = SKELETON_POINTS + STERNUM_STATIONS;
 /// Largest tree (node indices are `u8`).
 pub const MAX_TREE_NODES: usize = 255;
 /// Longest grid side supported (rows or columns).

@@ -1,6 +1,6 @@
-//! A 3-D thin-plate spline through the [`SKELETON_POINTS`] point pairs of a registration:
-//! the smooth map that takes every
-//! source point exactly onto its target and bends least in between.
+//! A 3-D thin-plate spline through up to [`SPLINE_POINTS`] point pairs (a registration's
+//! skeleton and sternum stations): the smooth map that takes every source point exactly
+//! onto its target and bends least in between.
 //!
 //! `f(p) = A·p + b + Σᵢ wᵢ ‖p − sᵢ‖` (the biharmonic kernel of three dimensions), with
 //! `Σ wᵢ = 0` and `Σ wᵢ sᵢᵀ = 0` so that far from the points the map is the affine part.
@@ -9,40 +9,45 @@
 //! rigid transform per neighbourhood cannot do.
 //!
 //! # Accuracy
-//! The `(N + 4)²` system (`N` = [`SKELETON_POINTS`]) is solved in `f32` by Gaussian elimination with partial
-//! pivoting, on coordinates taken about the source's centroid and divided by its RMS
-//! radius (the target's about its own centroid, by the same factor), so every entry is
+//! The `(n + 4)²` system of `n` pairs is solved in `f32` by Gaussian elimination with
+//! partial pivoting, on coordinates taken about the source's centroid and divided by its
+//! RMS radius (the target's about its own centroid, by the same factor), so every entry is
 //! of order one. Contract, against the textbook `f64` solve on raw coordinates
 //! (`tests/tests/steps.rs`, `thin_plate_agrees`: registered and bent skeletons of
 //! ~250 mm, targets up to 400 mm away): mapped points within 0.02 mm, each source point
 //! within 0.01 mm of its target; measured 6.3e-4 and 3.5e-4 mm.
 //!
 //! # Cost
-//! The system and its three right-hand sides are `(N + 4) · (N + 7) · 4` bytes (34 · 37 ·
-//! 4 = 5,032 B), held by a [`ThinPlateFit`] that eliminates it a few columns a call on the
-//! controller (about `(N + 4)³ / 3` multiply-adds in all, 13 k); a solved spline holds
-//! `N` centres and weights and the affine part (772 B), and maps a point in `N` square
-//! roots.
+//! The system and its three right-hand sides take `(C + 4) · (C + 7) · 4` bytes for the
+//! capacity `C` = [`SPLINE_POINTS`] (38 · 41 · 4 = 6,232 B), held by a [`ThinPlateFit`]
+//! that eliminates it a few columns a call on the controller (about `(n + 4)³ / 3`
+//! multiply-adds in all, 18 k for 34 pairs); a solved spline holds its centres and
+//! weights and the affine part (872 B), and maps a point in `n` square roots.
 
 use crate::error::{Error, Result};
-use crate::limits::SKELETON_POINTS;
+use crate::limits::SPLINE_POINTS;
 use crate::Vec3;
 use core::cmp::Ordering;
 use nalgebra::Matrix3;
 
-const N: usize = SKELETON_POINTS;
-/// Unknowns: a weight per pair, the linear part's three columns and the constant.
-const M: usize = N + 4;
-/// Columns of the augmented system: the unknowns and three right-hand sides.
+/// Pair capacity.
+const C: usize = SPLINE_POINTS;
+/// Unknowns at capacity: a weight per pair, the linear part's three columns and the
+/// constant.
+const M: usize = C + 4;
+/// Columns of the augmented system: the unknowns at capacity, then three right-hand sides
+/// (columns `M..W`, whatever the pair count).
 const W: usize = M + 3;
 
 /// A solved thin-plate spline (module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ThinPlate {
+    /// Pairs used (the first `n` centres and weights).
+    n: usize,
     /// Source points, centred and scaled.
-    centres: [Vec3; N],
+    centres: [Vec3; C],
     /// Kernel weights (scaled target units).
-    weights: [Vec3; N],
+    weights: [Vec3; C],
     /// Linear part (scaled units) and constant (scaled target units).
     linear: Matrix3<f32>,
     constant: Vec3,
@@ -54,7 +59,7 @@ pub struct ThinPlate {
 
 impl ThinPlate {
     /// The spline taking `source[i]` onto `target[i]` ([`ThinPlateFit`] in one go).
-    pub fn fit(source: &[Vec3; N], target: &[Vec3; N]) -> Result<Self> {
+    pub fn fit(source: &[Vec3], target: &[Vec3]) -> Result<Self> {
         let mut fit = ThinPlateFit::IDLE;
         fit.start(source, target)?;
         loop {
@@ -64,11 +69,16 @@ impl ThinPlate {
         }
     }
 
+    /// Point pairs it was fitted to.
+    pub fn pairs(&self) -> usize {
+        self.n
+    }
+
     /// Where the spline takes `p`.
     pub fn apply(&self, p: &Vec3) -> Vec3 {
         let q = (p - self.source_mean) * self.scale;
         let mut f = self.linear * q + self.constant;
-        for (c, w) in self.centres.iter().zip(&self.weights) {
+        for (c, w) in self.centres[..self.n].iter().zip(&self.weights) {
             f += w * (q - c).norm();
         }
         self.target_mean + f / self.scale
@@ -77,19 +87,20 @@ impl ThinPlate {
 
 /// A [`ThinPlate`] being solved in bounded steps (the controller's per-call budget):
 /// [`ThinPlateFit::start`] sets the system up, each [`ThinPlateFit::step`] eliminates a
-/// given number of its [`UNKNOWNS`] columns, and the last one back-substitutes. Both work
-/// in place: the 5 KB system never passes through the stack (the controller keeps it in
-/// its registration's state).
+/// given number of its `n + 4` columns, and the last one back-substitutes. Both work in
+/// place: the 6 KB system never passes through the stack (the controller keeps it in its
+/// registration's state).
 #[derive(Clone, Debug, PartialEq)]
 pub struct ThinPlateFit {
     /// The augmented system (Gaussian elimination with partial pivoting, in place).
     rows: [[f32; W]; M],
-    /// Columns eliminated so far.
+    /// Pairs, and columns eliminated so far.
+    n: usize,
     col: usize,
     /// The system's largest entry (the pivot threshold's scale).
     largest: f32,
     /// The spline's centring and scale, and its centres.
-    centres: [Vec3; N],
+    centres: [Vec3; C],
     source_mean: Vec3,
     target_mean: Vec3,
     scale: f32,
@@ -97,17 +108,14 @@ pub struct ThinPlateFit {
     solving: bool,
 }
 
-/// Unknowns of the spline's system: a weight per pair, the three linear columns and the
-/// constant; also the columns [`ThinPlateFit::step`] eliminates in all.
-pub const UNKNOWNS: usize = M;
-
 impl ThinPlateFit {
     /// Nothing to solve (the state before [`ThinPlateFit::start`]).
     pub const IDLE: ThinPlateFit = ThinPlateFit {
         rows: [[0.0; W]; M],
+        n: 0,
         col: 0,
         largest: 0.0,
-        centres: [Vec3::new(0.0, 0.0, 0.0); N],
+        centres: [Vec3::new(0.0, 0.0, 0.0); C],
         source_mean: Vec3::new(0.0, 0.0, 0.0),
         target_mean: Vec3::new(0.0, 0.0, 0.0),
         scale: 0.0,
@@ -121,16 +129,23 @@ impl ThinPlateFit {
     }
 
     /// Sets up, in place, the system of the spline taking `source[i]` onto `target[i]`
-    /// (`N²` distances). [`Error::RigidFit`] for a non-finite or coincident source.
-    pub fn start(&mut self, source: &[Vec3; N], target: &[Vec3; N]) -> Result<()> {
+    /// (`n²` distances). [`Error::Config`] unless both have the same length, 4 to
+    /// [`SPLINE_POINTS`] points; [`Error::RigidFit`] for a non-finite or coincident source.
+    pub fn start(&mut self, source: &[Vec3], target: &[Vec3]) -> Result<()> {
         self.solving = false;
-        let mean = |p: &[Vec3; N]| p.iter().fold(Vec3::zeros(), |a, q| a + q) / N as f32;
+        let n = source.len();
+        if n != target.len() || !(4..=C).contains(&n) {
+            return Err(Error::Config(
+                "a thin-plate spline takes 4 to 34 point pairs, as many targets as sources",
+            ));
+        }
+        let mean = |p: &[Vec3]| p.iter().fold(Vec3::zeros(), |a, q| a + q) / n as f32;
         let (source_mean, target_mean) = (mean(source), mean(target));
         let spread = source
             .iter()
             .map(|p| (p - source_mean).norm_squared())
             .sum::<f32>()
-            / N as f32;
+            / n as f32;
         let scale = 1.0 / libm::sqrtf(spread);
         if !scale.is_finite() {
             return Err(Error::RigidFit);
@@ -139,7 +154,7 @@ impl ThinPlateFit {
             *c = (p - source_mean) * scale;
         }
         // [K P; Pᵀ 0] [w; a] = [v; 0], K = ‖sᵢ − sⱼ‖, P = [sᵢᵀ 1], v = scaled targets.
-        let (rows, centres) = (&mut self.rows, &self.centres);
+        let (rows, centres) = (&mut self.rows, &self.centres[..n]);
         for row in rows.iter_mut() {
             *row = [0.0; W];
         }
@@ -149,25 +164,26 @@ impl ThinPlateFit {
             }
             let v = (target[i] - target_mean) * scale;
             for k in 0..3 {
-                rows[i][N + k] = ci[k];
-                rows[N + k][i] = ci[k];
+                rows[i][n + k] = ci[k];
+                rows[n + k][i] = ci[k];
                 rows[i][M + k] = v[k];
             }
-            rows[i][N + 3] = 1.0;
-            rows[N + 3][i] = 1.0;
+            rows[i][n + 3] = 1.0;
+            rows[n + 3][i] = 1.0;
         }
         self.largest = rows
             .iter()
             .flat_map(|r| r[..M].iter())
             .fold(0.0f32, |a, v| a.max(v.abs()));
-        (self.col, self.source_mean, self.target_mean) = (0, source_mean, target_mean);
+        (self.n, self.col) = (n, 0);
+        (self.source_mean, self.target_mean) = (source_mean, target_mean);
         self.scale = scale;
         self.solving = true;
         Ok(())
     }
 
     /// Eliminates up to `columns` more columns (at least one; each costs at most
-    /// `(N + 4) · (N + 7)` multiply-adds); once all are, back-substitutes and returns the
+    /// `(n + 4) · (C + 7)` multiply-adds); once all are, back-substitutes and returns the
     /// spline. [`Error::RigidFit`] when the system is singular: two coincident source
     /// points (equal rows), sources on one plane, or a pivot below [`MIN_PIVOT`] of the
     /// largest entry (or NaN).
@@ -177,10 +193,11 @@ impl ThinPlateFit {
         }
         // Whatever comes back, this system is done with unless more columns remain.
         self.solving = false;
-        let rows = &mut self.rows;
-        let stop = self.col.saturating_add(columns.max(1)).min(M);
+        let (n, rows) = (self.n, &mut self.rows);
+        let m = n + 4;
+        let stop = self.col.saturating_add(columns.max(1)).min(m);
         for col in self.col..stop {
-            let pivot = (col..M)
+            let pivot = (col..m)
                 .max_by(|&a, &b| rows[a][col].abs().total_cmp(&rows[b][col].abs()))
                 .unwrap_or(col);
             // A NaN pivot compares as nothing: singular too.
@@ -189,42 +206,52 @@ impl ThinPlateFit {
                 return Err(Error::RigidFit);
             }
             rows.swap(col, pivot);
-            let (head, tail) = rows.split_at_mut(col + 1);
+            let (head, tail) = rows[..m].split_at_mut(col + 1);
             let p = &head[col];
             let inv = 1.0 / p[col];
             for r in tail.iter_mut() {
                 let factor = r[col] * inv;
                 if factor != 0.0 {
-                    for k in col..W {
-                        r[k] -= factor * p[k];
+                    // Columns m..M are zero in every row: skipped. Zipped slices, no
+                    // index checks: this loop is the solve's cost on the controller.
+                    for (a, b) in r[col..m].iter_mut().zip(&p[col..m]) {
+                        *a -= factor * b;
+                    }
+                    for (a, b) in r[M..].iter_mut().zip(&p[M..]) {
+                        *a -= factor * b;
                     }
                 }
             }
         }
         self.col = stop;
-        if stop < M {
+        if stop < m {
             self.solving = true;
             return Ok(None);
         }
-        for col in (0..M).rev() {
+        for col in (0..m).rev() {
             // Rows below `col` hold their unknowns already.
-            let (upper, solved) = rows.split_at_mut(col + 1);
+            let (upper, solved) = rows[..m].split_at_mut(col + 1);
             let row = &mut upper[col];
             for k in M..W {
                 let mut v = row[k];
-                for (a, r) in row[col + 1..M].iter().zip(solved.iter()) {
+                for (a, r) in row[col + 1..m].iter().zip(solved.iter()) {
                     v -= a * r[k];
                 }
                 row[k] = v / row[col];
             }
         }
         let x = |r: usize| Vec3::new(rows[r][M], rows[r][M + 1], rows[r][M + 2]);
+        let mut weights = [Vec3::zeros(); C];
+        for (i, w) in weights[..n].iter_mut().enumerate() {
+            *w = x(i);
+        }
         Ok(Some(ThinPlate {
+            n,
             centres: self.centres,
-            weights: core::array::from_fn(x),
-            // Row N + k of the solution is the coefficient of coordinate k (3 outputs).
-            linear: Matrix3::from_columns(&[x(N), x(N + 1), x(N + 2)]),
-            constant: x(N + 3),
+            weights,
+            // Row n + k of the solution is the coefficient of coordinate k (3 outputs).
+            linear: Matrix3::from_columns(&[x(n), x(n + 1), x(n + 2)]),
+            constant: x(n + 3),
             source_mean: self.source_mean,
             target_mean: self.target_mean,
             scale: self.scale,
@@ -296,10 +323,31 @@ mod tests {
                 break s;
             }
         };
-        assert_eq!(calls, UNKNOWNS.div_ceil(3));
+        assert_eq!(calls, (30 + 4usize).div_ceil(3));
         assert_eq!(spline, ThinPlate::fit(&src, &dst).unwrap());
         assert!(!fit.solving());
         assert!(fit.step(1).is_err(), "solved: nothing left to step");
+    }
+
+    #[test]
+    fn pair_counts_outside_4_to_capacity_are_refused() {
+        let src = curves();
+        // Four points not on one plane (the first rib's lie on one).
+        let four = [src[0], src[8], src[14], src[25]];
+        assert!(ThinPlate::fit(&four, &four).is_ok());
+        assert!(matches!(
+            ThinPlate::fit(&src[..3], &src[..3]),
+            Err(Error::Config(_))
+        ));
+        assert!(matches!(
+            ThinPlate::fit(&src, &src[..29]),
+            Err(Error::Config(_))
+        ));
+        let many = [Vec3::zeros(); SPLINE_POINTS + 1];
+        assert!(matches!(
+            ThinPlate::fit(&many, &many),
+            Err(Error::Config(_))
+        ));
     }
 
     #[test]
