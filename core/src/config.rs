@@ -47,6 +47,10 @@ pub struct Config {
     /// How points are carried from the template onto the target once the skeletons are
     /// paired (improvement option; paper: [`Mapping::LocalRigid`]).
     pub mapping: Mapping,
+    /// Guided model with [`Mapping::ThinPlate`]: also pair points on the sternum's
+    /// midline ([`crate::registration::guided::sternum_stations`]), so the spline follows
+    /// the patient's sternum, not only the ribs.
+    pub sternum_stations: bool,
 }
 
 impl Default for Config {
@@ -60,6 +64,7 @@ impl Default for Config {
             target_up: None,
             lengthen_short_ribs: false,
             mapping: Mapping::LocalRigid,
+            sternum_stations: false,
         }
     }
 }
@@ -73,6 +78,7 @@ impl Config {
             rib_model: RibModel::Guided,
             lengthen_short_ribs: true,
             mapping: Mapping::ThinPlate,
+            sternum_stations: true,
             ..Config::default()
         }
     }

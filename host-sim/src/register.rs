@@ -61,17 +61,25 @@ pub enum Ablation {
     /// The thin-plate spline mapping (`Config::mapping`): each point by the local rigid
     /// transform of its skeleton neighbourhood, as in the paper.
     ThinPlate,
+    /// The sternum stations the spline pairs besides the rib skeleton
+    /// (`Config::sternum_stations`): the ribs' 30 pairs alone.
+    SternumStations,
 }
 
 impl Ablation {
     /// Every step an ablation row can leave out.
-    pub const ALL: [Ablation; 2] = [Ablation::LengthenShortRibs, Ablation::ThinPlate];
+    pub const ALL: [Ablation; 3] = [
+        Ablation::LengthenShortRibs,
+        Ablation::ThinPlate,
+        Ablation::SternumStations,
+    ];
 
     /// What is left out, in a table row's name.
     pub fn name(self) -> &'static str {
         match self {
             Ablation::LengthenShortRibs => "short ribs lengthened",
             Ablation::ThinPlate => "thin-plate mapping",
+            Ablation::SternumStations => "sternum stations",
         }
     }
 
@@ -80,6 +88,7 @@ impl Ablation {
         match self {
             Ablation::LengthenShortRibs => cfg.lengthen_short_ribs = false,
             Ablation::ThinPlate => cfg.mapping = ribreg_core::config::Mapping::LocalRigid,
+            Ablation::SternumStations => cfg.sternum_stations = false,
         }
     }
 }
@@ -401,8 +410,8 @@ impl Mapped {
             None => None,
         };
         let t_map = t2.elapsed();
-        let by = match reg.spline {
-            Some(_) => "the thin-plate spline of the 30 pairs".to_string(),
+        let by = match &reg.spline {
+            Some(s) => format!("the thin-plate spline of {} skeleton pairs", s.pairs()),
             None => format!("{} local transforms", cache.fits),
         };
         progress(&format!(
@@ -470,6 +479,7 @@ impl Mapped {
             },
             "mapping": {
                 "by": if reg.spline.is_some() { "thin_plate_spline" } else { "local_rigid" },
+                "spline_pairs": reg.spline.as_ref().map(|s| s.pairs()),
                 "neighbourhoods": cache.len(),
                 "fits": cache.fits,
                 "cache_hits": cache.hits,

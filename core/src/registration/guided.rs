@@ -38,7 +38,7 @@
 
 use crate::config::{Config, RIBS, RIB_SAMPLES};
 use crate::error::{Cloud, Error, Result, Side};
-use crate::limits::{CARRY_CACHE, FIT_SAMPLES, SKELETON_POINTS, SOM1_CAPACITY};
+use crate::limits::{CARRY_CACHE, FIT_SAMPLES, SKELETON_POINTS, SOM1_CAPACITY, STERNUM_STATIONS};
 use crate::math::fit::{equal_steps, PolyFit};
 use crate::math::geom::{Frame, Rigid};
 use crate::math::kabsch;
@@ -199,6 +199,8 @@ pub struct RibFits {
     fits: [Option<PolyFit<2>>; 4],
     /// Sum and count of the sternum nodes' x.
     sternum: (f32, f32),
+    /// The sternum nodes' midline ([`RibFits::sternum_stations`]).
+    line: SternumLine,
 }
 
 fn rib_of(label: u8) -> Option<usize> {
@@ -210,13 +212,16 @@ impl RibFits {
     pub fn new(nodes: &[Vec3], node_labels: &[u8], to_fit: &Rigid) -> Result<Self> {
         let mut ext = [(f32::INFINITY, f32::NEG_INFINITY); 4];
         let (mut sx, mut sn) = (0.0f32, 0.0f32);
+        let mut line = SternumLine::default();
         for (p, &l) in nodes.iter().zip(node_labels) {
-            let x = to_fit.apply(p).x;
+            let q = to_fit.apply(p);
+            let x = q.x;
             if let Some(r) = rib_of(l) {
                 ext[r] = (ext[r].0.min(x), ext[r].1.max(x));
             } else if l == 1 {
                 sx += x;
                 sn += 1.0;
+                line.add(&q);
             }
         }
         let mut fits = [None; 4];
@@ -230,7 +235,13 @@ impl RibFits {
             ext,
             fits,
             sternum: (sx, sn),
+            line,
         })
+    }
+
+    /// The [`sternum_stations`] of the nodes this was made with, in their own frame.
+    pub fn sternum_stations(&self) -> Option<[Vec3; STERNUM_STATIONS]> {
+        self.line.stations(&self.to_fit.inverse())
     }
 
     /// Adds a cloud point with its label (points of no rib are ignored).
@@ -376,6 +387,88 @@ pub fn lengthen_short(
         }
     }
     out
+}
+
+/// Fewest SOM-1 nodes labelled sternum for [`sternum_stations`].
+pub const MIN_STERNUM_NODES: usize = 4;
+/// Least cranio-caudal extent of those nodes for [`sternum_stations`], mm: a sternum is
+/// 100–190 mm long; a few nodes within a rib spacing give no midline to pair.
+pub const MIN_STERNUM_EXTENT_MM: f32 = 30.0;
+
+/// [`STERNUM_STATIONS`] points on the sternum's midline, from the SOM-1 `nodes` labelled
+/// 1 (`labels`): in the fitting frame `to_fit` (y cranial) the line `x(y)`, `z(y)`
+/// fitted to them by least squares, sampled at equal steps from their lowest to their
+/// highest y (the xiphoid's tip to the manubrium's top), and taken back by the inverse of
+/// `to_fit`. The same rule on the template's nodes (its own frame) and on the target's
+/// (the last round's labels and fitting frame, [`RibFits::sternum_stations`]) pairs the
+/// patient's sternum with the template's for the thin-plate mapping, so a longer xiphoid
+/// or manubrium stretches the map, and the midline anchors it across the chest. `None`
+/// with fewer than [`MIN_STERNUM_NODES`] such nodes or less than
+/// [`MIN_STERNUM_EXTENT_MM`] between them (the mapping then uses the rib skeleton alone).
+/// One pass over the nodes, no buffer.
+pub fn sternum_stations(
+    nodes: &[Vec3],
+    labels: &[u8],
+    to_fit: &Rigid,
+) -> Option<[Vec3; STERNUM_STATIONS]> {
+    let mut line = SternumLine::default();
+    for (p, _) in nodes.iter().zip(labels).filter(|(_, &l)| l == 1) {
+        line.add(&to_fit.apply(p));
+    }
+    line.stations(&to_fit.inverse())
+}
+
+/// The running sums of [`sternum_stations`]' line fit, in the fitting frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct SternumLine {
+    /// Nodes, and the first one's y (the sums are about it: no cancellation).
+    n: f32,
+    y0: Option<f32>,
+    /// Σy, Σy², Σx, Σxy, Σz, Σzy.
+    sums: [f32; 6],
+    /// Lowest and highest y.
+    lo: f32,
+    hi: f32,
+}
+
+impl SternumLine {
+    fn add(&mut self, q: &Vec3) {
+        let origin = *self.y0.get_or_insert(q.y);
+        let y = q.y - origin;
+        if self.n == 0.0 {
+            (self.lo, self.hi) = (y, y);
+        }
+        self.n += 1.0;
+        let [sy, syy, sx, sxy, sz, szy] = &mut self.sums;
+        (*sy, *syy) = (*sy + y, *syy + y * y);
+        (*sx, *sxy, *sz, *szy) = (*sx + q.x, *sxy + q.x * y, *sz + q.z, *szy + q.z * y);
+        (self.lo, self.hi) = (self.lo.min(y), self.hi.max(y));
+    }
+
+    /// The stations, taken out of the fitting frame by `back` (see [`sternum_stations`]).
+    fn stations(&self, back: &Rigid) -> Option<[Vec3; STERNUM_STATIONS]> {
+        let origin = self.y0?;
+        let [sy, syy, sx, sxy, sz, szy] = self.sums;
+        let n = self.n;
+        let det = n * syy - sy * sy;
+        let enough = n >= MIN_STERNUM_NODES as f32 && self.hi - self.lo >= MIN_STERNUM_EXTENT_MM;
+        if !enough || det.partial_cmp(&0.0) != Some(core::cmp::Ordering::Greater) {
+            return None;
+        }
+        // x = ax + bx·y, z = az + bz·y.
+        let (bx, bz) = ((n * sxy - sx * sy) / det, (n * szy - sz * sy) / det);
+        let (ax, az) = ((sx - bx * sy) / n, (sz - bz * sy) / n);
+        let mut out = [Vec3::zeros(); STERNUM_STATIONS];
+        for (o, y) in out
+            .iter_mut()
+            .zip(equal_steps(self.lo, self.hi, STERNUM_STATIONS))
+        {
+            *o = back.apply(&Vec3::new(ax + bx * y, y + origin, az + bz * y));
+        }
+        out.iter()
+            .all(|p| p.iter().all(|v| v.is_finite()))
+            .then_some(out)
+    }
 }
 
 /// Per rib (2..=5), the span of the target's rib on the patient's right and left of the
@@ -564,6 +657,7 @@ pub struct TargetSkeleton {
     labels: NodeLabels,
     ribs: Option<RibFits>,
     skeleton: [Vec3; SKELETON_POINTS],
+    sternum: Option<[Vec3; STERNUM_STATIONS]>,
     map: Option<LocalRigid>,
     cache: TransformCache<CARRY_CACHE>,
     lookup: Option<Lookup>,
@@ -613,6 +707,7 @@ impl TargetSkeleton {
             labels: NodeLabels::new(),
             ribs: None,
             skeleton: [Vec3::zeros(); SKELETON_POINTS],
+            sternum: None,
             map: None,
             cache: TransformCache::new(),
             lookup: None,
@@ -650,6 +745,7 @@ impl TargetSkeleton {
         self.pose = Rigid::identity();
         self.carried.clear();
         self.ribs = None;
+        self.sternum = None;
         self.map = None;
         self.cache = TransformCache::new();
         self.lookup = None;
@@ -664,6 +760,12 @@ impl TargetSkeleton {
     /// How clearly the refined pose hypotheses picked the pose, once they are done.
     pub fn confidence(&self) -> Option<PoseConfidence> {
         self.confidence
+    }
+
+    /// The target's [`sternum_stations`] (its SOM-1 nodes, the last round's labels and
+    /// fitting frame, gathered by that round's [`RibFits`]), once done.
+    pub fn sternum(&self) -> Option<[Vec3; STERNUM_STATIONS]> {
+        self.sternum.filter(|_| self.stage == GuidedStage::Done)
     }
 
     /// The rigid pose target → template (the last fitting frame) and the 30 target
@@ -818,6 +920,7 @@ impl TargetSkeleton {
                 let ribs = self.ribs.take().ok_or(Error::RigidFit)?;
                 let prior = cfg.lengthen_short_ribs.then_some(template_skeleton);
                 (self.skeleton, _) = ribs.finish(Some(template_split), prior, Cloud::Target)?;
+                self.sternum = ribs.sternum_stations();
                 self.stage = if round < last_round {
                     GuidedStage::Refit(round)
                 } else {
@@ -897,6 +1000,44 @@ impl TargetSkeleton {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn sternum_stations_span_the_sternum_nodes_in_the_fitting_frame() {
+        // In the fitting frame: 20 sternum nodes on a line from y = -100 to 20, rib
+        // nodes (labels 2..=5, 0) beside it; the nodes are given in a turned, moved frame.
+        let line = |y: f32| Vec3::new(2.0 + 0.01 * y, y, -10.0 + 0.05 * y);
+        let mut fit_nodes: Vec<Vec3> = (0..20)
+            .map(|k| line(-100.0 + 120.0 * k as f32 / 19.0))
+            .collect();
+        let mut labels = vec![1u8; 20];
+        for (k, l) in [2u8, 3, 4, 5, 0].iter().enumerate() {
+            fit_nodes.push(Vec3::new(60.0, -30.0 * k as f32, 5.0));
+            labels.push(*l);
+        }
+        let to_fit = Rigid {
+            rotation: *nalgebra::Rotation3::from_euler_angles(0.3, -0.2, 1.1).matrix(),
+            translation: Vec3::new(40.0, -300.0, 12.0),
+        };
+        let back = to_fit.inverse();
+        let nodes: Vec<Vec3> = fit_nodes.iter().map(|p| back.apply(p)).collect();
+        let stations = sternum_stations(&nodes, &labels, &to_fit).unwrap();
+        for (s, y) in stations.iter().zip([-100.0, -60.0, -20.0, 20.0]) {
+            assert!((to_fit.apply(s) - line(y)).norm() < 1e-3, "{s} at y {y}");
+        }
+        // Too few nodes, too short a sternum, or none: no stations.
+        assert_eq!(
+            sternum_stations(&nodes[3..], &labels[3..], &to_fit).map(|_| ()),
+            Some(())
+        );
+        assert_eq!(sternum_stations(&nodes[17..], &labels[17..], &to_fit), None);
+        let short: Vec<u8> = (0..25).map(|k| u8::from(k < 4)).collect();
+        assert_eq!(
+            sternum_stations(&nodes, &short, &to_fit),
+            None,
+            "4 nodes within 19 mm"
+        );
+        assert_eq!(sternum_stations(&nodes, &[2; 25], &to_fit), None);
+    }
 
     /// A skeleton whose rib `r` runs along x from -100 to 100 mm (split at 0), at y = -30 r.
     fn skeleton(scale_right: f32, scale_left: f32) -> [Vec3; SKELETON_POINTS] {

@@ -3,12 +3,15 @@
 
 use crate::config::{Config, Mapping, RibModel};
 use crate::error::{Cloud, Error, Result};
-use crate::limits::{MAX_CLOUD_POINTS, MIN_CLOUD_POINTS};
+use crate::limits::{
+    MAX_CLOUD_POINTS, MIN_CLOUD_POINTS, SKELETON_POINTS, SPLINE_POINTS, STERNUM_STATIONS,
+};
 use crate::math::geom::{nearest, validate, validate_count, validate_points, Frame, Rigid};
 use crate::math::spline::{ThinPlate, ThinPlateFit};
 use crate::registration::endpoints::{match_endpoints, EndpointMatch};
 use crate::registration::guided::{
-    check_coverage, fit_ribs, label_nodes, GuidedStage, NodeLabels, PoseConfidence, TargetSkeleton,
+    check_coverage, fit_ribs, label_nodes, sternum_stations, GuidedStage, NodeLabels,
+    PoseConfidence, TargetSkeleton,
 };
 use crate::registration::local_rigid::{LocalRigid, TransformCache};
 use crate::registration::skeleton::{GraphBuild, RibEnds, RibSkeleton, SkeletonGraph};
@@ -168,9 +171,12 @@ pub struct Registration {
     /// The paper's mapping template → target (Eq. 6); with [`Mapping::ThinPlate`] it
     /// still gives each waypoint its quality figure ([`LocalRigid::residual`]).
     pub map: LocalRigid,
-    /// With [`Mapping::ThinPlate`]: the spline through the paired skeletons, which then
-    /// maps the points ([`Registration::map_in_place`]).
+    /// With [`Mapping::ThinPlate`]: the spline through the paired skeletons (and sternum
+    /// stations), which then maps the points ([`Registration::map_in_place`]).
     pub spline: Option<ThinPlate>,
+    /// With [`Config::sternum_stations`]: the target's sternum stations, paired with the
+    /// template's by the spline (`None` where either shows too little sternum).
+    pub sternum: Option<[Vec3; STERNUM_STATIONS]>,
     /// Guided model: how clearly the pose hypotheses picked the pose (`None` for the
     /// graph model).
     pub confidence: Option<PoseConfidence>,
@@ -385,13 +391,14 @@ impl Registering {
             Stage::Done(reg, fit) => {
                 if self.spline_next {
                     self.spline_next = false;
-                    fit.start(&template.skeleton.points, &reg.skeleton.points)?;
+                    let (source, target, n) = spline_pairs(template, reg);
+                    fit.start(&source[..n], &target[..n])?;
                     return Ok(false);
                 }
                 if !fit.solving() {
                     return Ok(true);
                 }
-                let columns = (budget as usize).saturating_mul(SPLINE_COLUMNS_PER_UNIT);
+                let columns = (budget as usize).div_ceil(SPLINE_UNITS_PER_COLUMN);
                 let Some(spline) = fit.step(columns)? else {
                     return Ok(false);
                 };
@@ -486,9 +493,11 @@ impl Registering {
             paths: Default::default(),
             degree: [3; 4],
         };
+        let sternum = run.sternum().filter(|_| cfg.sternum_stations);
         let graph = core::mem::replace(graph, SkeletonGraph::empty());
         let mut registration = finish(template, graph, pose, None, skeleton, cfg)?;
         registration.confidence = confidence;
+        registration.sternum = sternum;
         self.spline_next = cfg.mapping == Mapping::ThinPlate;
         self.stage = Stage::Done(registration, ThinPlateFit::IDLE);
         Ok(())
@@ -530,10 +539,36 @@ fn graph_skeleton(
     }
 }
 
-/// Columns of the thin-plate spline's system eliminated per unit of
-/// [`Registering::step`]'s budget: a column is at most 34 · 37 multiply-adds, about a
-/// SOM iteration's work.
-pub const SPLINE_COLUMNS_PER_UNIT: usize = 1;
+/// Units of [`Registering::step`]'s budget per column of the thin-plate spline's system
+/// eliminated: a column is at most 37 · 41 multiply-adds, about two SOM iterations'
+/// work (with one unit a column, eight columns took a controller call to 174,600
+/// instructions, over its 168,000).
+pub const SPLINE_UNITS_PER_COLUMN: usize = 2;
+
+/// The thin-plate spline's pairs of `reg` (of `template`): the skeleton points, and the
+/// sternum stations when both clouds have them; the count in use.
+fn spline_pairs(
+    template: &Template,
+    reg: &Registration,
+) -> ([Vec3; SPLINE_POINTS], [Vec3; SPLINE_POINTS], usize) {
+    let mut source = [Vec3::zeros(); SPLINE_POINTS];
+    let mut target = [Vec3::zeros(); SPLINE_POINTS];
+    source[..SKELETON_POINTS].copy_from_slice(&template.skeleton.points);
+    target[..SKELETON_POINTS].copy_from_slice(&reg.skeleton.points);
+    let own = sternum_stations(
+        &template.graph.som1,
+        &template.node_labels,
+        &Rigid::identity(),
+    );
+    match (own, reg.sternum) {
+        (Some(s), Some(t)) => {
+            source[SKELETON_POINTS..].copy_from_slice(&s);
+            target[SKELETON_POINTS..].copy_from_slice(&t);
+            (source, target, SPLINE_POINTS)
+        }
+        _ => (source, target, SKELETON_POINTS),
+    }
+}
 
 /// The mapping template → target from the paired skeletons (the spline, if any, is
 /// solved after).
@@ -553,6 +588,7 @@ fn finish(
         skeleton,
         map,
         spline: None,
+        sternum: None,
         confidence: None,
     })
 }
