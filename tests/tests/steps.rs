@@ -780,6 +780,21 @@ fn kabsch_nearly_collinear_mirror() {
 ///                                              as an angle) times L, plus translation
 /// measured: no neighbourhood difference; mapped points max 7.6e-3 mm (0.78 of its bound)
 /// ```
+/// 300 points (exact in `f32`) around and beyond a skeleton of the built-in cage's size,
+/// for the mappings' agreement tests.
+fn skeleton_queries(seed: u64) -> Vec<P3> {
+    let mut rng = r::Rng::new(seed);
+    (0..300)
+        .map(|_| {
+            f32_exact(&[[
+                rng.uniform(-120.0, 120.0),
+                rng.uniform(-130.0, 25.0),
+                rng.uniform(-45.0, 15.0),
+            ]])[0]
+        })
+        .collect()
+}
+
 #[test]
 fn local_rigid_agrees() {
     // Skeletons: (1) the core's own template/target skeletons of the cage vs a moved,
@@ -824,16 +839,7 @@ fn local_rigid_agrees() {
     for nr in [10, 3, 30] {
         skeletons.push((format!("synthetic bent, N_r {nr}"), synth, bent, nr));
     }
-    let mut rng = r::Rng::new(17);
-    let queries: Vec<P3> = (0..300)
-        .map(|_| {
-            f32_exact(&[[
-                rng.uniform(-120.0, 120.0),
-                rng.uniform(-130.0, 25.0),
-                rng.uniform(-45.0, 15.0),
-            ]])[0]
-        })
-        .collect();
+    let queries = skeleton_queries(17);
     let (mut worst, mut worst_rel, mut differing, mut widened) = (0.0f64, 0.0f64, 0usize, 0usize);
     for (name, src, dst, nr) in &skeletons {
         let core = LocalRigid::new(*src, *dst, *nr).unwrap();
@@ -909,16 +915,7 @@ fn thin_plate_agrees() {
     let src = tpl.skeleton.points;
     let bent = src.map(|p| p + Vec3::new(0.1 * p.x * p.x.abs() / 100.0, 0.0, 3e-4 * p.x * p.x));
     pairs.push((src, bent));
-    let mut rng = r::Rng::new(23);
-    let queries: Vec<P3> = (0..300)
-        .map(|_| {
-            f32_exact(&[[
-                rng.uniform(-120.0, 120.0),
-                rng.uniform(-130.0, 25.0),
-                rng.uniform(-45.0, 15.0),
-            ]])[0]
-        })
-        .collect();
+    let queries = skeleton_queries(23);
     let (mut worst, mut worst_pair) = (0.0f64, 0.0f64);
     for (src, dst) in &pairs {
         let core = ThinPlate::fit(src, dst).unwrap();

@@ -268,18 +268,7 @@ mod tests {
     use super::*;
     use nalgebra::Rotation3;
 
-    fn curves() -> [Vec3; 30] {
-        let mut out = [Vec3::zeros(); 30];
-        let mut k = 0;
-        for (r, n) in [6usize, 6, 8, 10].iter().enumerate() {
-            for j in 0..*n {
-                let x = -100.0 + 200.0 * j as f32 / (*n - 1) as f32;
-                out[k] = Vec3::new(x, -28.0 * r as f32 - 0.002 * x * x, -0.004 * x * x);
-                k += 1;
-            }
-        }
-        out
-    }
+    use crate::registration::example::curved_skeleton as curves;
 
     #[test]
     fn an_affine_map_is_reproduced_everywhere() {

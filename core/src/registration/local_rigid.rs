@@ -380,19 +380,7 @@ mod tests {
         }
     }
 
-    fn skeleton() -> [Vec3; SKELETON_POINTS] {
-        // Four curved "ribs" at different heights.
-        let mut out = [Vec3::zeros(); SKELETON_POINTS];
-        let mut k = 0;
-        for (r, n) in crate::config::RIB_SAMPLES.iter().enumerate() {
-            for j in 0..*n {
-                let x = -100.0 + 200.0 * j as f32 / (*n - 1) as f32;
-                out[k] = Vec3::new(x, -28.0 * r as f32 - 0.002 * x * x, -0.004 * x * x);
-                k += 1;
-            }
-        }
-        out
-    }
+    use crate::registration::example::curved_skeleton as skeleton;
 
     #[test]
     fn rigid_motion_of_the_skeleton_moves_every_point_rigidly() {
