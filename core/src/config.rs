@@ -100,10 +100,11 @@ pub enum Mapping {
     /// The paper (Eq. 6): each point by the rigid transform of its `N_r` nearest skeleton
     /// pairs ([`crate::registration::local_rigid`]).
     LocalRigid,
-    /// Improvement: the thin-plate spline through all 30 pairs
-    /// ([`crate::math::spline::ThinPlate`]): smooth, exact at the skeleton, and it
-    /// stretches where the patient's cartilage is longer than the template's, which a
-    /// rigid transform per neighbourhood cannot (see the README's evaluation).
+    /// Improvement: the thin-plate spline through all 30 pairs, and the sternum stations
+    /// with [`Config::sternum_stations`] ([`crate::math::spline::ThinPlate`]): smooth,
+    /// exact at the skeleton, and it stretches where the patient's cartilage is longer
+    /// than the template's, which a rigid transform per neighbourhood cannot (see the
+    /// README's evaluation).
     ThinPlate,
 }
 
