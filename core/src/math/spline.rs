@@ -268,7 +268,7 @@ mod tests {
     use super::*;
     use nalgebra::Rotation3;
 
-    use crate::registration::example::curved_skeleton as curves;
+    use crate::math::curved_skeleton as curves;
 
     #[test]
     fn an_affine_map_is_reproduced_everywhere() {

@@ -60,19 +60,3 @@ pub fn cage(stretch: f32) -> impl Iterator<Item = Vec3> {
     });
     sternum.chain(ribs)
 }
-
-/// A test skeleton of 30 points: four curved "ribs" at different heights, each its
-/// `RIB_SAMPLES` points from x = -100 to 100 mm (for the mapping's unit tests).
-#[cfg(test)]
-pub(crate) fn curved_skeleton() -> [Vec3; crate::limits::SKELETON_POINTS] {
-    let mut out = [Vec3::zeros(); crate::limits::SKELETON_POINTS];
-    let mut k = 0;
-    for (r, n) in crate::config::RIB_SAMPLES.iter().enumerate() {
-        for j in 0..*n {
-            let x = -100.0 + 200.0 * j as f32 / (*n - 1) as f32;
-            out[k] = Vec3::new(x, -28.0 * r as f32 - 0.002 * x * x, -0.004 * x * x);
-            k += 1;
-        }
-    }
-    out
-}

@@ -380,7 +380,7 @@ mod tests {
         }
     }
 
-    use crate::registration::example::curved_skeleton as skeleton;
+    use crate::math::curved_skeleton as skeleton;
 
     #[test]
     fn rigid_motion_of_the_skeleton_moves_every_point_rigidly() {
