@@ -44,6 +44,10 @@ pub struct Config {
     /// template, than every other rib side
     /// ([`crate::registration::guided::lengthen_short`]). The paper has no such step.
     pub lengthen_short_ribs: bool,
+    /// Guided model: from the second round on, take each rib on to where the cloud's
+    /// points reach beyond its ends, on the template as on the target
+    /// ([`crate::registration::guided::Tips`]). The paper has no such step.
+    pub rib_tips: bool,
     /// How points are carried from the template onto the target once the skeletons are
     /// paired (improvement option; paper: [`Mapping::LocalRigid`]).
     pub mapping: Mapping,
@@ -63,6 +67,7 @@ impl Default for Config {
             rib_model: RibModel::Graph,
             target_up: None,
             lengthen_short_ribs: false,
+            rib_tips: false,
             mapping: Mapping::LocalRigid,
             sternum_stations: false,
         }
@@ -77,6 +82,7 @@ impl Config {
         Config {
             rib_model: RibModel::Guided,
             lengthen_short_ribs: true,
+            rib_tips: true,
             mapping: Mapping::ThinPlate,
             sternum_stations: true,
             ..Config::default()

@@ -64,14 +64,18 @@ pub enum Ablation {
     /// The sternum stations the spline pairs besides the rib skeleton
     /// (`Config::sternum_stations`): the ribs' 30 pairs alone.
     SternumStations,
+    /// The search for each rib's tips beyond its outermost nodes (`Config::rib_tips`):
+    /// the rib extents the nodes show.
+    RibTips,
 }
 
 impl Ablation {
     /// Every step an ablation row can leave out.
-    pub const ALL: [Ablation; 3] = [
+    pub const ALL: [Ablation; 4] = [
         Ablation::LengthenShortRibs,
         Ablation::ThinPlate,
         Ablation::SternumStations,
+        Ablation::RibTips,
     ];
 
     /// What is left out, in a table row's name.
@@ -80,6 +84,7 @@ impl Ablation {
             Ablation::LengthenShortRibs => "short ribs lengthened",
             Ablation::ThinPlate => "thin-plate mapping",
             Ablation::SternumStations => "sternum stations",
+            Ablation::RibTips => "rib tips searched",
         }
     }
 
@@ -89,6 +94,7 @@ impl Ablation {
             Ablation::LengthenShortRibs => cfg.lengthen_short_ribs = false,
             Ablation::ThinPlate => cfg.mapping = ribreg_core::config::Mapping::LocalRigid,
             Ablation::SternumStations => cfg.sternum_stations = false,
+            Ablation::RibTips => cfg.rib_tips = false,
         }
     }
 }
@@ -469,7 +475,7 @@ impl Mapped {
                 "rotation": rows(&reg.pose.rotation),
                 "translation": reg.pose.translation.as_slice(),
             },
-            "coverage": coverage_json(&tpl, &reg),
+            "coverage": coverage_json(&reg),
             "pose_hypotheses": confidence_json(&reg),
             "metrics": {
                 "ed_mean_mm": metrics.ed.mean,
@@ -534,16 +540,10 @@ fn skeleton_json(tpl: &Template, reg: &Registration) -> Value {
 
 /// Guided model: each rib side's span as a share of the template's, and the least
 /// accepted (`guided::check_coverage`); `null` for the graph model.
-fn coverage_json(tpl: &Template, reg: &Registration) -> Value {
-    if tpl.ends.is_some() {
+fn coverage_json(reg: &Registration) -> Value {
+    let Some(spans) = reg.coverage else {
         return Value::Null;
-    }
-    let spans = guided::side_spans(
-        &tpl.skeleton.points,
-        &tpl.midline_fraction,
-        &reg.skeleton.points,
-        &reg.pose,
-    );
+    };
     let ribs: Vec<Value> = RIBS
         .iter()
         .zip(&spans)

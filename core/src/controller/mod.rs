@@ -608,7 +608,7 @@ impl<const VOXELS: usize> Controller<VOXELS> {
         };
         if outcome.is_ok() {
             if let Some(reg) = r.registration() {
-                self.confidence = Some(confidence(reg, template, self.targets.len()));
+                self.confidence = Some(confidence(reg, self.targets.len()));
             }
         }
         self.registering = None;
@@ -650,15 +650,10 @@ impl<const VOXELS: usize> Controller<VOXELS> {
     }
 }
 
-/// The wire summary of how clearly `reg` (of `template`) found the patient.
-fn confidence(reg: &Registration, template: &Template, waypoints: usize) -> RegistrationW {
-    let spans = crate::registration::guided::side_spans(
-        &template.skeleton.points,
-        &template.midline_fraction,
-        &reg.skeleton.points,
-        &reg.pose,
-    );
-    // NaN (no evidence) counts as 0 %.
+/// The wire summary of how clearly `reg` found the patient.
+fn confidence(reg: &Registration, waypoints: usize) -> RegistrationW {
+    let spans = reg.coverage.unwrap_or([[f32::NAN; 2]; 4]);
+    // NaN (no evidence, or the graph model) counts as 0 %.
     let least = spans.iter().flatten().fold(
         f32::INFINITY,
         |a, &b| if b.is_nan() { 0.0 } else { a.min(b) },

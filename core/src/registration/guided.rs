@@ -31,7 +31,9 @@
 //!    ([`fit_ribs`]); a rib side shorter, against the template's, than every other rib
 //!    side is lengthened to the least of those ([`lengthen_short`], with
 //!    [`Config::lengthen_short_ribs`]): a lost lateral tip does not pull that side's
-//!    stations toward the sternum;
+//!    stations toward the sternum; from the second round on (and on the template) each
+//!    rib goes on to the farthest point along its end's direction ([`Tips`], with
+//!    [`Config::rib_tips`]), since the outermost nodes sit inside a thinly seen tip;
 //! 4. steps 2–3 repeat [`GUIDED_ROUNDS`] times, each round's skeleton pairs mapping the
 //!    template nodes more closely onto the target than a rigid pose can, and their
 //!    Kabsch fit giving the next round's fitting frame.
@@ -119,7 +121,11 @@ pub const MIN_RIB_POINTS: usize = 8;
 /// more of the template's; the 23 turned or sparse runs that came out wrong (a flipped
 /// pose, waypoints 30–126 mm off) have some side at 0–58 %, and the 120 sweeps missing a
 /// side or rib 5 at 0–52 % (the template's ribs squeeze onto what is there, or a rib is
-/// not found at all). 60 % sits between.
+/// not found at all). 60 % sits between. Since the tip search ([`Tips`]) the shares are
+/// those of the first round's nodes ([`TargetSkeleton::coverage`]); on 30 standard and
+/// 30 hard phantom pairs the complete sweeps show every side at 62 % or more, the 180
+/// sweeps missing a side or rib 5 at most 55 %, and the robustness sweep above refuses
+/// every incomplete sweep and no complete one it did not refuse before.
 pub const MIN_SIDE_SPAN: f32 = 0.6;
 
 /// Per-node labels of a SOM-1 node set (0 = none, 1 = sternum, 2..=5 ribs).
@@ -167,7 +173,10 @@ pub fn label_nodes(nodes: &[Vec3], cloud: &[Vec3], labels: &[u8]) -> Result<Node
 /// the bottom of a 9 mm tube moves a node-based curve by a millimetre). The extent comes
 /// from the nodes: the outermost *points* would follow every noisy or outlying point
 /// that lands near a rib's end (measured on the phantoms: 3.5 mm mean waypoint error
-/// with point extents, 2.9 mm with node extents). One streaming pass, no buffer.
+/// with point extents, 2.9 mm with node extents). One streaming pass, no buffer; with
+/// `tips` ([`Config::rib_tips`]) a second pass takes each rib on to where its points
+/// reach beyond the first pass's ends ([`Tips`]), as the target's later rounds do.
+#[allow(clippy::too_many_arguments)]
 #[inline(never)]
 pub fn fit_ribs(
     cloud: &[Vec3],
@@ -177,12 +186,24 @@ pub fn fit_ribs(
     mut label_of: impl FnMut(usize, &Vec3) -> u8,
     split: Option<&[f32; 4]>,
     which: Cloud,
+    tips: bool,
 ) -> Result<([Vec3; SKELETON_POINTS], [f32; 4])> {
-    let mut fits = RibFits::new(nodes, node_labels, to_fit)?;
-    for (i, p) in cloud.iter().enumerate().step_by(fit_stride(cloud.len())) {
-        fits.add(label_of(i, p), p);
+    let mut pass = |previous: Option<&[Vec3; SKELETON_POINTS]>| -> Result<_> {
+        let mut fits = RibFits::new(nodes, node_labels, to_fit)?;
+        if let Some(previous) = previous {
+            fits = fits.with_tips(&previous.map(|p| to_fit.apply(&p)));
+        }
+        for (i, p) in cloud.iter().enumerate().step_by(fit_stride(cloud.len())) {
+            fits.add(label_of(i, p), p);
+        }
+        fits.finish(split, None, which)
+    };
+    let first = pass(None)?;
+    if tips {
+        pass(Some(&first.0))
+    } else {
+        Ok(first)
     }
-    fits.finish(split, None, which)
 }
 
 /// The stride of the cloud points entering [`fit_ribs`] (at most [`FIT_SAMPLES`]).
@@ -197,6 +218,8 @@ pub struct RibFits {
     to_fit: Rigid,
     ext: [(f32, f32); 4],
     fits: [Option<PolyFit<2>>; 4],
+    /// With [`RibFits::with_tips`]: how far each rib end goes on ([`Tips`]).
+    tips: Option<Tips>,
     /// Sum and count of the sternum nodes' x.
     sternum: (f32, f32),
     /// The sternum nodes' midline ([`RibFits::sternum_stations`]).
@@ -234,8 +257,42 @@ impl RibFits {
             to_fit: *to_fit,
             ext,
             fits,
+            tips: None,
             sternum: (sx, sn),
             line,
+        })
+    }
+
+    /// Also looks for each rib's tips beyond the ends of `previous`, a skeleton of the same
+    /// cloud in the fitting frame ([`Tips`]); a rib reaching farther than its nodes is
+    /// resampled to where it reaches.
+    pub fn with_tips(mut self, previous: &[Vec3; SKELETON_POINTS]) -> Self {
+        self.tips = Some(Tips::new(previous));
+        self
+    }
+
+    /// Where the sternum splits a rib extending over `x0..=x1` (`x0 <= x1`): the mean
+    /// x of the sternum nodes, kept within the rib; the middle if there are none.
+    fn midline(&self, x0: f32, x1: f32) -> f32 {
+        let (sx, sn) = self.sternum;
+        if sn > 0.0 {
+            (sx / sn).clamp(x0, x1)
+        } else {
+            0.5 * (x0 + x1)
+        }
+    }
+
+    /// Per rib (2..=5), how far its labelled nodes reach on the patient's right (low x)
+    /// and left of the sternum, `[right, left]`, mm in the fitting frame: the evidence
+    /// of [`check_coverage`], without the tip search. NaN for a rib without nodes.
+    pub fn spans(&self) -> [[f32; 2]; 4] {
+        self.ext.map(|(x0, x1)| {
+            if x0 <= x1 {
+                let mid = self.midline(x0, x1);
+                [mid - x0, x1 - mid]
+            } else {
+                [f32::NAN; 2]
+            }
         })
     }
 
@@ -246,8 +303,11 @@ impl RibFits {
 
     /// Adds a cloud point with its label (points of no rib are ignored).
     pub fn add(&mut self, label: u8, p: &Vec3) {
+        let q = self.to_fit.apply(p);
+        if let Some(tips) = &mut self.tips {
+            tips.add(&q);
+        }
         if let Some(Some(f)) = rib_of(label).map(|r| &mut self.fits[r]) {
-            let q = self.to_fit.apply(p);
             f.add(q.x, [q.y, q.z]);
         }
     }
@@ -261,7 +321,6 @@ impl RibFits {
         prior: Option<&[Vec3; SKELETON_POINTS]>,
         which: Cloud,
     ) -> Result<([Vec3; SKELETON_POINTS], [f32; 4])> {
-        let (sx, sn) = self.sternum;
         let back = self.to_fit.inverse();
         let mut curves = [None; 4];
         // Per rib: the observed extent (x0, x1) and the midline.
@@ -278,13 +337,11 @@ impl RibFits {
                 .filter(|_| found >= MIN_RIB_POINTS)
                 .ok_or(short)?;
             curves[r] = Some(f.solve(3).map_err(|_| short)?);
-            let (x0, x1) = self.ext[r];
-            let mid = if sn > 0.0 {
-                (sx / sn).clamp(x0, x1)
-            } else {
-                0.5 * (x0 + x1)
-            };
-            ends[r] = (x0, mid, x1);
+            let (mut x0, mut x1) = self.ext[r];
+            if let Some([lo, hi]) = self.tips.map(|t| t.reach(r)) {
+                (x0, x1) = (x0.min(lo), x1.max(hi));
+            }
+            ends[r] = (x0, self.midline(x0, x1), x1);
         }
         let mut fractions = [0.5f32; 4];
         for (fraction, &(x0, mid, x1)) in fractions.iter_mut().zip(&ends) {
@@ -331,6 +388,96 @@ impl RibFits {
             offset += RIB_SAMPLES[r];
         }
         Ok((points, fractions))
+    }
+}
+
+/// Radius of the tube about a rib end's ray in which [`Tips`] takes points, mm: the
+/// cartilage's half-width (4–5 mm) plus the sweep's noise and breathing. Measured with
+/// `ribreg eval --preset both --ours-only --pairs 50` (mean / max waypoint error, standard
+/// and hard, aligned): 4 mm 1.80 / 6.6 and 4.11 / 15.3; 6 mm 1.34 / 6.5 and 2.82 / 10.7;
+/// 8 mm 1.35 / 6.5 and 2.67 / 11.0; 10 mm 1.39 / 7.5 and 2.56 / 11.0 (a wider tube starts
+/// to reach the next rib's cartilage).
+pub const TIP_RADIUS_MM: f32 = 8.0;
+/// How far beyond a rib end [`Tips`] looks, mm: about a third of a cartilage, more than a
+/// round's ends move (same measure, 6 mm tube: 15 mm 1.51 / 6.8 and 4.16 / 13.3 (the
+/// rank-3 point); 20 mm 1.36 / 6.7 and 2.99 / 11.3; 30 mm 1.34 / 6.5 and 2.82 / 10.7;
+/// 40 mm 1.34 / 6.5 and 2.84 / 10.7).
+pub const TIP_REACH_MM: f32 = 30.0;
+
+/// The tip search of [`RibFits::with_tips`]. Each rib end of a previous skeleton goes on
+/// along its last segment; the farthest cloud point within [`TIP_RADIUS_MM`] of that ray
+/// and at most [`TIP_REACH_MM`] beyond the end is where the rib reaches.
+///
+/// # Why
+/// A SOM node sits at the mean of the points nearest to it, so the outermost node of a
+/// rib lies inside its tip by about half a node spacing, and farther where the points
+/// thin out: on the hard phantoms (a costochondral junction seen in part, tip holes,
+/// breathing) the target's end stations sat at 0.86 of the true tip's x (median; 10 %
+/// of rib sides below 0.79) against the template's 0.90, so a lateral waypoint landed
+/// 5–11 mm toward the sternum. The labels do not reach there either (a tip point's
+/// nearest node is often more than [`LABEL_RADIUS_MM`] away). The farthest point, not
+/// the second or third: a thinned tip keeps a handful of points (same measure, 6 mm
+/// tube, hard: 2.82 mm with the farthest, 3.49 with the second, 3.93 with the third).
+/// The search runs from the second round on (the first has no skeleton of the target)
+/// and on the template's own skeleton, so both ends mean the same.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Tips {
+    /// Per rib, per end (low x, high x): the end and its outward unit direction.
+    ends: [[(Vec3, Vec3); 2]; 4],
+    /// Per rib, per end: the farthest distance along the ray found so far (0: none).
+    far: [[f32; 2]; 4],
+}
+
+impl Tips {
+    /// Rays from the ends of `previous` (30 skeleton points, fitting frame).
+    fn new(previous: &[Vec3; SKELETON_POINTS]) -> Self {
+        let mut ends = [[(Vec3::zeros(), Vec3::zeros()); 2]; 4];
+        let mut offset = 0;
+        for (r, ends) in ends.iter_mut().enumerate() {
+            let n = RIB_SAMPLES[r];
+            let ray = |end: Vec3, inner: Vec3| {
+                // A degenerate end has no direction: its ray finds nothing.
+                (
+                    end,
+                    (end - inner)
+                        .try_normalize(1e-6)
+                        .unwrap_or_else(Vec3::zeros),
+                )
+            };
+            *ends = [
+                ray(previous[offset], previous[offset + 1]),
+                ray(previous[offset + n - 1], previous[offset + n - 2]),
+            ];
+            offset += n;
+        }
+        Tips {
+            ends,
+            far: [[0.0; 2]; 4],
+        }
+    }
+
+    /// Takes a cloud point (fitting frame).
+    fn add(&mut self, q: &Vec3) {
+        for (ends, far) in self.ends.iter().zip(self.far.iter_mut()) {
+            for ((end, dir), far) in ends.iter().zip(far.iter_mut()) {
+                let v = q - end;
+                let t = v.dot(dir);
+                if t > *far
+                    && t <= TIP_REACH_MM
+                    && v.norm_squared() - t * t <= TIP_RADIUS_MM * TIP_RADIUS_MM
+                {
+                    *far = t;
+                }
+            }
+        }
+    }
+
+    /// Rib `r`'s reach: the lowest and the highest x (the previous ends' own where no
+    /// point lies beyond them).
+    fn reach(&self, r: usize) -> [f32; 2] {
+        let [(e0, d0), (e1, d1)] = self.ends[r];
+        let [f0, f1] = self.far[r];
+        [e0.x + d0.x * f0, e1.x + d1.x * f1]
     }
 }
 
@@ -471,55 +618,26 @@ impl SternumLine {
     }
 }
 
-/// Per rib (2..=5), the span of the target's rib on the patient's right and left of the
-/// sternum as a share of the template's: `template` are the template's skeleton points
-/// (its own frame), `fractions` its sternum split of each rib, `target` the target's
-/// skeleton points and `to_fit` its fitting frame (target → template). Both skeletons
-/// place each side's stations at equal steps over that side alone ([`fit_ribs`]), so the
-/// ratio of the x spacing of any two same-side stations is that side's span ratio; the
-/// stations nearest the sternum give it. NaN where the template's stations coincide.
-pub fn side_spans(
-    template: &[Vec3; SKELETON_POINTS],
-    fractions: &[f32; 4],
-    target: &[Vec3; SKELETON_POINTS],
-    to_fit: &Rigid,
-) -> [[f32; 2]; 4] {
-    let mut spans = [[0.0; 2]; 4];
-    let mut offset = 0;
-    for (r, span) in spans.iter_mut().enumerate() {
-        let n = RIB_SAMPLES[r];
-        let step = 1.0 / (n - 1) as f32;
-        let fm = fractions[r].clamp(0.0, 1.0);
-        // The last station at or below the split and the first at or above it (the
-        // outermost ones if the split is that close to an end).
-        let at = fm / step;
-        let below = at as usize;
-        let lo = below.clamp(1, n - 1);
-        let hi = (below + usize::from((below as f32) < at)).min(n - 2);
-        let t = |k: usize| template[offset + k].x;
-        let s = |k: usize| to_fit.apply(&target[offset + k]).x;
-        // Low x is the patient's right.
-        *span = [
-            (s(lo) - s(0)) / (t(lo) - t(0)),
-            (s(n - 1) - s(hi)) / (t(n - 1) - t(hi)),
-        ];
-        offset += n;
+/// Per rib (2..=5) and side (`[right, left]`), the target's [`RibFits::spans`] as a
+/// share of the template's. NaN where either has no nodes or the template's is 0.
+pub fn side_shares(target: &[[f32; 2]; 4], template: &[[f32; 2]; 4]) -> [[f32; 2]; 4] {
+    let mut shares = [[f32::NAN; 2]; 4];
+    for ((share, t), own) in shares.iter_mut().zip(target).zip(template) {
+        for ((share, t), own) in share.iter_mut().zip(t).zip(own) {
+            if *own > 0.0 {
+                *share = t / own;
+            }
+        }
     }
-    spans
+    shares
 }
 
-/// Refuses a target skeleton that does not cover the template's: [`Error::NotSeen`] for
-/// the rib side of the smallest [`side_spans`] share, if below [`MIN_SIDE_SPAN`] (or
-/// NaN: no evidence of coverage). Arguments as for [`side_spans`]; 30 points, no buffer.
-pub fn check_coverage(
-    template: &[Vec3; SKELETON_POINTS],
-    fractions: &[f32; 4],
-    target: &[Vec3; SKELETON_POINTS],
-    to_fit: &Rigid,
-) -> Result<()> {
+/// Refuses a target that does not cover the template: [`Error::NotSeen`] for the rib
+/// side of the smallest of its [`side_shares`] `spans`, if below
+/// [`MIN_SIDE_SPAN`] (or NaN: no evidence of coverage).
+pub fn check_coverage(spans: &[[f32; 2]; 4]) -> Result<()> {
     let mut worst: Option<(f32, u8, Side)> = None;
-    let spans = side_spans(template, fractions, target, to_fit);
-    for (&rib, &[right, left]) in RIBS.iter().zip(&spans) {
+    for (&rib, &[right, left]) in RIBS.iter().zip(spans) {
         for (ratio, side) in [(right, Side::Right), (left, Side::Left)] {
             let short = ratio.is_nan() || ratio < MIN_SIDE_SPAN;
             if short && worst.is_none_or(|(w, ..)| ratio.is_nan() || ratio < w) {
@@ -657,6 +775,8 @@ pub struct TargetSkeleton {
     labels: NodeLabels,
     ribs: Option<RibFits>,
     skeleton: [Vec3; SKELETON_POINTS],
+    /// The first round's [`side_shares`].
+    coverage: [[f32; 2]; 4],
     sternum: Option<[Vec3; STERNUM_STATIONS]>,
     map: Option<LocalRigid>,
     cache: TransformCache<CARRY_CACHE>,
@@ -707,6 +827,7 @@ impl TargetSkeleton {
             labels: NodeLabels::new(),
             ribs: None,
             skeleton: [Vec3::zeros(); SKELETON_POINTS],
+            coverage: [[f32::NAN; 2]; 4],
             sternum: None,
             map: None,
             cache: TransformCache::new(),
@@ -745,6 +866,7 @@ impl TargetSkeleton {
         self.pose = Rigid::identity();
         self.carried.clear();
         self.ribs = None;
+        self.coverage = [[f32::NAN; 2]; 4];
         self.sternum = None;
         self.map = None;
         self.cache = TransformCache::new();
@@ -766,6 +888,12 @@ impl TargetSkeleton {
     /// fitting frame, gathered by that round's [`RibFits`]), once done.
     pub fn sternum(&self) -> Option<[Vec3; STERNUM_STATIONS]> {
         self.sternum.filter(|_| self.stage == GuidedStage::Done)
+    }
+
+    /// Per rib, the [`side_shares`] of the nodes labelled in the first round (from the
+    /// rigid pose; no tip search), once done: what [`check_coverage`] checks.
+    pub fn coverage(&self) -> Option<[[f32; 2]; 4]> {
+        (self.stage == GuidedStage::Done).then_some(self.coverage)
     }
 
     /// The rigid pose target → template (the last fitting frame) and the 30 target
@@ -893,7 +1021,14 @@ impl TargetSkeleton {
                 }
                 self.cursor = end as u32;
                 if end >= target.som1.len() {
-                    self.ribs = Some(RibFits::new(&target.som1, &self.labels, &self.pose)?);
+                    let ribs = RibFits::new(&target.som1, &self.labels, &self.pose)?;
+                    // From the second round on, the last round's skeleton (in this
+                    // round's fitting frame) says where to look for the tips.
+                    self.ribs = Some(if round > 0 && cfg.rib_tips {
+                        ribs.with_tips(&self.skeleton.map(|p| self.pose.apply(&p)))
+                    } else {
+                        ribs
+                    });
                     self.begin(GuidedStage::Fit(round))?;
                 }
             }
@@ -920,6 +1055,16 @@ impl TargetSkeleton {
                 let ribs = self.ribs.take().ok_or(Error::RigidFit)?;
                 let prior = cfg.lengthen_short_ribs.then_some(template_skeleton);
                 (self.skeleton, _) = ribs.finish(Some(template_split), prior, Cloud::Target)?;
+                if round == 0 {
+                    // Coverage is what the nodes labelled from the rigid pose show,
+                    // against the template's own nodes. Later rounds label through the
+                    // skeleton they fitted, tips and all: on a one-sided sweep whose pose
+                    // came out wrong that spread labels onto the seen side's cartilage
+                    // (hard phantom 7 without its right side, 85° off: rib 5's right
+                    // side at 55 % in the first round, 64 % in the last).
+                    let own = RibFits::new(&template.som1, template_labels, &Rigid::identity())?;
+                    self.coverage = side_shares(&ribs.spans(), &own.spans());
+                }
                 self.sternum = ribs.sternum_stations();
                 self.stage = if round < last_round {
                     GuidedStage::Refit(round)
@@ -1122,23 +1267,102 @@ mod tests {
     }
 
     #[test]
-    fn coverage_is_the_smallest_side_span() {
-        let template = skeleton(1.0, 1.0);
-        let split = [0.5; 4];
+    fn the_tip_search_takes_each_rib_on_to_its_farthest_point_near_the_end_ray() {
+        // Straight ribs along x at y = -30 r; every rib's nodes from -80 to 80 mm (the
+        // sternum node at x = 0), its points (those past the nodes unlabelled, as a thin
+        // tip's are) as the cases below say.
+        let on = |r: usize, x: f32| Vec3::new(x, -30.0 * r as f32, 0.0);
+        let mut nodes = heapless::Vec::<Vec3, 16>::new();
+        let mut labels = heapless::Vec::<u8, 16>::new();
+        for (r, &rib) in RIBS.iter().enumerate() {
+            for x in [-80.0, 80.0] {
+                nodes.push(on(r, x)).unwrap();
+                labels.push(rib).unwrap();
+            }
+        }
+        nodes.push(Vec3::new(0.0, -45.0, 0.0)).unwrap();
+        labels.push(1).unwrap();
+        let mut points = std::vec::Vec::new();
+        for (r, &rib) in RIBS.iter().enumerate() {
+            // Ribs 2, 4, 5 reach ±100 mm; rib 3 only the nodes' ±80.
+            let reach = if r == 1 { 80.0 } else { 100.0 };
+            for x in equal_steps(-reach, reach, 81) {
+                points.push((if x.abs() <= 80.0 { rib } else { 0 }, on(r, x)));
+            }
+        }
+        // Not rib 3's tip: 9 mm off its ray (the tube is 8 mm); not rib 4's: 51 mm past
+        // its end (the search looks 30 mm on).
+        points.push((0, on(1, -95.0) + Vec3::new(0.0, 9.0, 0.0)));
+        points.push((0, on(2, 131.0)));
+        let fitted = |tips: Option<&[Vec3; SKELETON_POINTS]>| {
+            let mut fits = RibFits::new(&nodes, &labels, &Rigid::identity()).unwrap();
+            if let Some(previous) = tips {
+                fits = fits.with_tips(previous);
+            }
+            for (label, p) in &points {
+                fits.add(*label, p);
+            }
+            let spans = fits.spans();
+            (
+                fits.finish(Some(&[0.5; 4]), None, Cloud::Target).unwrap().0,
+                spans,
+            )
+        };
+        let (first, spans) = fitted(None);
+        let (second, spans_with_tips) = fitted(Some(&first));
+        // The nodes' extents: the first pass, and the coverage evidence either way.
+        assert_eq!(spans, [[80.0; 2]; 4]);
+        assert_eq!(spans_with_tips, spans);
+        let mut offset = 0;
+        for (r, &n) in RIB_SAMPLES.iter().enumerate() {
+            let (lo, hi) = (first[offset].x, first[offset + n - 1].x);
+            assert!((lo + 80.0).abs() < 1e-3 && (hi - 80.0).abs() < 1e-3, "{r}");
+            let (lo, hi) = (second[offset].x, second[offset + n - 1].x);
+            let reach = if r == 1 { 80.0 } else { 100.0 };
+            assert!((lo + reach).abs() < 1e-3, "rib {}: {lo}", RIBS[r]);
+            assert!((hi - reach).abs() < 1e-3, "rib {}: {hi}", RIBS[r]);
+            offset += n;
+        }
+    }
+
+    #[test]
+    fn coverage_is_the_smallest_share_of_the_nodes_spans() {
+        // Nodes of each rib from -100·right to 100·left mm along x (sternum nodes at
+        // x = 0), anywhere: their spans are the same in the fitting frame.
         let moved = Rigid {
             rotation: nalgebra::Rotation3::from_euler_angles(0.3, -0.2, 2.0).into_inner(),
             translation: Vec3::new(400.0, -20.0, 7.0),
         };
-        let to_target = |s: &[Vec3; SKELETON_POINTS]| s.map(|p| moved.apply(&p));
-        let to_fit = moved.inverse();
-        // The same skeleton, or one 30 % smaller or larger, anywhere: covered.
+        let spans_of = |right: f32, left: f32| {
+            let mut nodes = heapless::Vec::<Vec3, 16>::new();
+            let mut labels = heapless::Vec::<u8, 16>::new();
+            for (r, &rib) in RIBS.iter().enumerate() {
+                for x in [-100.0 * right, 100.0 * left] {
+                    nodes
+                        .push(moved.apply(&Vec3::new(x, -30.0 * r as f32, 0.0)))
+                        .unwrap();
+                    labels.push(rib).unwrap();
+                }
+            }
+            nodes
+                .push(moved.apply(&Vec3::new(0.0, -45.0, 0.0)))
+                .unwrap();
+            labels.push(1).unwrap();
+            RibFits::new(&nodes, &labels, &moved.inverse())
+                .unwrap()
+                .spans()
+        };
+        let template = spans_of(1.0, 1.0);
+        for [right, left] in template {
+            assert!((right - 100.0).abs() < 1e-3 && (left - 100.0).abs() < 1e-3);
+        }
+        // The same ribs, or 30 % smaller or larger: covered.
         for scale in [0.7, 1.0, 1.3] {
-            let target = to_target(&skeleton(scale, scale));
-            assert_eq!(check_coverage(&template, &split, &target, &to_fit), Ok(()));
+            let shares = side_shares(&spans_of(scale, scale), &template);
+            assert_eq!(check_coverage(&shares), Ok(()));
         }
         // The right side squeezed to 45 %, the left to 55 %: the right is named.
-        let target = to_target(&skeleton(0.45, 0.55));
-        let e = check_coverage(&template, &split, &target, &to_fit);
+        let e = check_coverage(&side_shares(&spans_of(0.45, 0.55), &template));
         assert!(
             matches!(
                 e,
@@ -1151,9 +1375,9 @@ mod tests {
             ),
             "{e:?}"
         );
-        // A side collapsed (or reversed) is not seen; NaN is no evidence either.
-        let target = to_target(&skeleton(1.0, -0.2));
-        let e = check_coverage(&template, &split, &target, &to_fit);
+        // A side collapsed onto the sternum is not seen; NaN is no evidence either, and
+        // a rib without nodes has no span.
+        let e = check_coverage(&side_shares(&spans_of(1.0, 0.0), &template));
         assert!(
             matches!(
                 e,
@@ -1165,12 +1389,22 @@ mod tests {
             ),
             "{e:?}"
         );
-        let mut target = to_target(&skeleton(1.0, 1.0));
-        target[12] = Vec3::new(f32::NAN, 0.0, 0.0);
+        let mut shares = [[1.0; 2]; 4];
+        shares[2][0] = f32::NAN;
         assert!(matches!(
-            check_coverage(&template, &split, &target, &to_fit),
-            Err(Error::NotSeen { rib: 4, .. })
+            check_coverage(&shares),
+            Err(Error::NotSeen {
+                rib: 4,
+                side: Side::Right,
+                ..
+            })
         ));
+        let none = RibFits::new(&[], &[], &Rigid::identity()).unwrap().spans();
+        assert!(none.iter().flatten().all(|v| v.is_nan()));
+        assert!(side_shares(&template, &none)
+            .iter()
+            .flatten()
+            .all(|v| v.is_nan()));
     }
 
     fn turned(deg: f32) -> Rigid {

@@ -71,6 +71,7 @@ impl Template {
                     |_, p| nearest(&graph.som1, p).map_or(0, |(j, _)| node_labels[j]),
                     None,
                     Cloud::Template,
+                    cfg.rib_tips,
                 )?;
                 let skeleton = RibSkeleton {
                     points,
@@ -180,6 +181,10 @@ pub struct Registration {
     /// Guided model: how clearly the pose hypotheses picked the pose (`None` for the
     /// graph model).
     pub confidence: Option<PoseConfidence>,
+    /// Guided model: per rib (2..=5), the [`crate::registration::guided::side_shares`]
+    /// `[right, left]` the target's nodes labelled from the rigid pose show, as checked by
+    /// [`crate::registration::guided::check_coverage`] (`None` for the graph model).
+    pub coverage: Option<[[f32; 2]; 4]>,
 }
 
 impl Registration {
@@ -475,16 +480,12 @@ impl Registering {
             return Err(Error::Config("the guided rib model did not finish"));
         };
         let (pose, points) = run.result().ok_or(Error::RigidFit)?;
+        let coverage = run.coverage().ok_or(Error::RigidFit)?;
         let confidence = run.confidence();
         // A sweep that misses a side or a rib is refused, not mapped from the wrong
         // cartilage; then a pose that a distinct one fits nearly as well (checked second:
         // a one-sided sweep is also ambiguous, and "not seen" says what to rescan).
-        check_coverage(
-            &template.skeleton.points,
-            &template.midline_fraction,
-            &points,
-            &pose,
-        )?;
+        check_coverage(&coverage)?;
         if let Some(c) = confidence {
             c.check()?;
         }
@@ -497,6 +498,7 @@ impl Registering {
         let graph = core::mem::replace(graph, SkeletonGraph::empty());
         let mut registration = finish(template, graph, pose, None, skeleton, cfg)?;
         registration.confidence = confidence;
+        registration.coverage = Some(coverage);
         registration.sternum = sternum;
         self.spline_next = cfg.mapping == Mapping::ThinPlate;
         self.stage = Stage::Done(registration, ThinPlateFit::IDLE);
@@ -590,5 +592,6 @@ fn finish(
         spline: None,
         sternum: None,
         confidence: None,
+        coverage: None,
     })
 }

@@ -279,7 +279,7 @@ const WAYPOINT_W: usize = 2 * U8 + 4 * F32;
 
 /// How clearly the registration found the patient, sent before its waypoints: the pose
 /// hypotheses' residuals ([`crate::registration::guided::PoseConfidence`]) and the
-/// target's coverage ([`crate::registration::guided::side_spans`]). (Added in version 2.)
+/// target's coverage ([`crate::registration::guided::side_shares`]). (Added in version 2.)
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RegistrationW {
     /// Pose hypotheses refined.

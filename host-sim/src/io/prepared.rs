@@ -30,7 +30,7 @@ use super::{
 };
 
 /// The version this module writes and reads.
-pub const PREPARED_VERSION: u32 = 1;
+pub const PREPARED_VERSION: u32 = 2;
 /// Skeleton points in a prepared template (ribs 2..5 with 6, 6, 8, 10 points).
 pub const PREPARED_SKELETON: usize = 30;
 /// Most SOM-1 nodes a prepared template may hold (the core's SOM-1 capacity).
@@ -357,12 +357,14 @@ mod tests {
         let path = dir.path().join("t.ply");
         write_prepared(&path, &sample()).unwrap();
         let good = std::fs::read(&path).unwrap();
-        // Another version.
+        // Another version: the one before (its skeleton had no tip search) and the next.
         let header_end = good.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
-        let mut v2 = good.clone();
-        v2[header_end] = 2;
-        let e = parse_template_file(&v2).unwrap_err().to_string();
-        assert!(e.contains("version 2"), "{e}");
+        for other in [PREPARED_VERSION - 1, PREPARED_VERSION + 1] {
+            let mut bytes = good.clone();
+            bytes[header_end..header_end + 4].copy_from_slice(&other.to_le_bytes());
+            let e = parse_template_file(&bytes).unwrap_err().to_string();
+            assert!(e.contains(&format!("version {other}")), "{e}");
+        }
         // A truncated body.
         let e = parse_template_file(&good[..good.len() - 3])
             .unwrap_err()
