@@ -633,11 +633,11 @@ pub fn side_shares(target: &[[f32; 2]; 4], template: &[[f32; 2]; 4]) -> [[f32; 2
 }
 
 /// Refuses a target that does not cover the template: [`Error::NotSeen`] for the rib
-/// side of the smallest of its [`side_shares`] `spans`, if below
-/// [`MIN_SIDE_SPAN`] (or NaN: no evidence of coverage).
-pub fn check_coverage(spans: &[[f32; 2]; 4]) -> Result<()> {
+/// side of the smallest of its [`side_shares`] `shares`, if below [`MIN_SIDE_SPAN`] (or
+/// NaN: no evidence of coverage).
+pub fn check_coverage(shares: &[[f32; 2]; 4]) -> Result<()> {
     let mut worst: Option<(f32, u8, Side)> = None;
-    for (&rib, &[right, left]) in RIBS.iter().zip(spans) {
+    for (&rib, &[right, left]) in RIBS.iter().zip(shares) {
         for (ratio, side) in [(right, Side::Right), (left, Side::Left)] {
             let short = ratio.is_nan() || ratio < MIN_SIDE_SPAN;
             if short && worst.is_none_or(|(w, ..)| ratio.is_nan() || ratio < w) {
