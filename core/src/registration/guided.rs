@@ -32,8 +32,9 @@
 //!    side is lengthened to the least of those ([`lengthen_short`], with
 //!    [`Config::lengthen_short_ribs`]): a lost lateral tip does not pull that side's
 //!    stations toward the sternum; from the second round on (and on the template) each
-//!    rib goes on to the farthest point along its end's direction ([`Tips`], with
-//!    [`Config::rib_tips`]), since the outermost nodes sit inside a thinly seen tip;
+//!    rib goes on to the outermost point near its end's direction that the points
+//!    behind it support, and one spacing beyond ([`Tips`], with [`Config::rib_tips`]),
+//!    since the outermost nodes sit inside a thinly seen tip;
 //! 4. steps 2–3 repeat [`GUIDED_ROUNDS`] times, each round's skeleton pairs mapping the
 //!    template nodes more closely onto the target than a rigid pose can, and their
 //!    Kabsch fit giving the next round's fitting frame.
@@ -193,8 +194,13 @@ pub fn fit_ribs(
         if let Some(previous) = previous {
             fits = fits.with_tips(&previous.map(|p| to_fit.apply(&p)));
         }
-        for (i, p) in cloud.iter().enumerate().step_by(fit_stride(cloud.len())) {
-            fits.add(label_of(i, p), p);
+        let stride = fit_stride(cloud.len());
+        for (i, p) in cloud.iter().enumerate() {
+            if i.is_multiple_of(stride) {
+                fits.add(label_of(i, p), p);
+            } else {
+                fits.see(p);
+            }
         }
         fits.finish(split, None, which)
     };
@@ -220,6 +226,8 @@ pub struct RibFits {
     fits: [Option<PolyFit<2>>; 4],
     /// With [`RibFits::with_tips`]: how far each rib end goes on ([`Tips`]).
     tips: Option<Tips>,
+    /// Points shown ([`RibFits::add`] and [`RibFits::see`]) and fitted ([`RibFits::add`]).
+    shown: (u32, u32),
     /// Sum and count of the sternum nodes' x.
     sternum: (f32, f32),
     /// The sternum nodes' midline ([`RibFits::sternum_stations`]).
@@ -258,6 +266,7 @@ impl RibFits {
             ext,
             fits,
             tips: None,
+            shown: (0, 0),
             sternum: (sx, sn),
             line,
         })
@@ -304,11 +313,23 @@ impl RibFits {
     /// Adds a cloud point with its label (points of no rib are ignored).
     pub fn add(&mut self, label: u8, p: &Vec3) {
         let q = self.to_fit.apply(p);
+        self.shown = (
+            self.shown.0.saturating_add(1),
+            self.shown.1.saturating_add(1),
+        );
         if let Some(tips) = &mut self.tips {
             tips.add(&q);
         }
         if let Some(Some(f)) = rib_of(label).map(|r| &mut self.fits[r]) {
             f.add(q.x, [q.y, q.z]);
+        }
+    }
+
+    /// Shows a cloud point that the fits skip ([`fit_stride`]) to the tip search alone.
+    pub fn see(&mut self, p: &Vec3) {
+        self.shown.0 = self.shown.0.saturating_add(1);
+        if let Some(tips) = &mut self.tips {
+            tips.add(&self.to_fit.apply(p));
         }
     }
 
@@ -338,7 +359,11 @@ impl RibFits {
                 .ok_or(short)?;
             curves[r] = Some(f.solve(3).map_err(|_| short)?);
             let (mut x0, mut x1) = self.ext[r];
-            if let Some([lo, hi]) = self.tips.map(|t| t.reach(r)) {
+            // The mean spacing in x of the rib's points among all those shown: its
+            // fitted points over its extent, times the points shown per fitted one.
+            let (shown, fitted) = self.shown;
+            let spacing = (x1 - x0) * fitted as f32 / (found as f32 * shown.max(1) as f32);
+            if let Some([lo, hi]) = self.tips.map(|t| t.reach(r, spacing)) {
                 (x0, x1) = (x0.min(lo), x1.max(hi));
             }
             ends[r] = (x0, self.midline(x0, x1), x1);
@@ -404,9 +429,34 @@ pub const TIP_RADIUS_MM: f32 = 8.0;
 /// 40 mm 1.34 / 6.5 and 2.84 / 10.7).
 pub const TIP_REACH_MM: f32 = 30.0;
 
+/// How far, in x, a tip point may lie beyond the next-outermost one and still count,
+/// in mean point spacings of its rib ([`Tips`]): a lone point beyond the rest (a speckle
+/// or a neighbouring structure caught in the tube) is not a tip. In spacings rather
+/// than millimetres because a sweep's density varies: a rib of the phantoms' targets
+/// has its points about 0.45 mm apart in x, a thinned tip's about 1.2 mm, a sweep
+/// keeping 30 % of them 1.5 and 4 mm. Measured with `ribreg eval --preset both
+/// --ours-only --pairs 50` (mean / max waypoint error, standard and hard, aligned) and
+/// `eval --robustness --preset hard --ours-only --pairs 50` (silent failures of 1,300
+/// complete runs; mean waypoint error of the sparse sweeps): no support 1.31 / 10.0
+/// (two standard pairs taken out to an outlier), 2.15 / 12.9, 82, 3.44 (and no
+/// spacing beyond); 8 spacings 1.20 / 5.8,
+/// 2.18 / 9.1, 48, 2.84; 11: 1.21 / 5.8, 2.10 / 8.8, 48, 2.81; 14: 1.27 / 5.9,
+/// 2.10 / 8.8, 47, 2.82; 20: 1.32 / 7.7, 2.12 / 8.8, 49, 2.88. A fixed 5 mm: 1.21 /
+/// 5.8, 2.11 / 8.8, 54, 3.32 (the sparse sweeps' tips lose their support).
+pub const TIP_SUPPORT_SPACINGS: f32 = 11.0;
+/// Outermost points [`Tips`] keeps per rib end: the tip, enough behind it to find one
+/// with support ([`TIP_SUPPORT_SPACINGS`]) past two lone points, and the spacing of
+/// those behind it.
+pub const TIP_CANDIDATES: usize = 4;
+
 /// The tip search of [`RibFits::with_tips`]. Each rib end of a previous skeleton goes on
-/// along its last segment; the farthest cloud point within [`TIP_RADIUS_MM`] of that ray
-/// and at most [`TIP_REACH_MM`] beyond the end is where the rib reaches.
+/// along its last segment. Of the cloud points within [`TIP_RADIUS_MM`] of that line
+/// and at most [`TIP_REACH_MM`] before or beyond the end, the outermost in x whose
+/// next-outermost lies within [`TIP_SUPPORT_SPACINGS`] of the rib's mean spacing is
+/// taken, and the rib reaches one spacing of the points behind it (their mean gap in x)
+/// beyond it: the outermost of points spread along a rib falls short of its tip by
+/// about one spacing, and the spacing differs between a CT template, a sweep, a
+/// thinned tip and a sparse sweep.
 ///
 /// # Why
 /// A SOM node sits at the mean of the points nearest to it, so the outermost node of a
@@ -415,17 +465,24 @@ pub const TIP_REACH_MM: f32 = 30.0;
 /// breathing) the target's end stations sat at 0.86 of the true tip's x (median; 10 %
 /// of rib sides below 0.79) against the template's 0.90, so a lateral waypoint landed
 /// 5–11 mm toward the sternum. The labels do not reach there either (a tip point's
-/// nearest node is often more than [`LABEL_RADIUS_MM`] away). The farthest point, not
-/// the second or third: a thinned tip keeps a handful of points (same measure, 6 mm
-/// tube, hard: 2.82 mm with the farthest, 3.49 with the second, 3.93 with the third).
-/// The search runs from the second round on (the first has no skeleton of the target)
-/// and on the template's own skeleton, so both ends mean the same.
+/// nearest node is often more than [`LABEL_RADIUS_MM`] away). The outermost x, not the
+/// farthest distance along the ray: the ray leaves the rib's own curve, and the foot of
+/// the farthest point on it lay beyond the true tip (sweep targets' ends at 1.014 of
+/// the true tip's x, the template's at 1.005; the lateral waypoints' outward error
+/// follows that ratio, correlation 0.67). Every cloud point, not only those the fit
+/// takes ([`fit_stride`]): a tip is a handful of points, and a stride skips some (the
+/// template's ends were at 0.970–1.015 of its labelled tips). One spacing beyond: with
+/// the outermost point itself, the template's 3,000 points reached farther than a
+/// sweep's 750 (30 %), and those sweeps' waypoints came out 0.8 mm worse than with the
+/// spacing added. The search runs from the second round on (the first has no skeleton
+/// of the target) and on the template's own skeleton, so both ends mean the same.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Tips {
     /// Per rib, per end (low x, high x): the end and its outward unit direction.
     ends: [[(Vec3, Vec3); 2]; 4],
-    /// Per rib, per end: the farthest distance along the ray found so far (0: none).
-    far: [[f32; 2]; 4],
+    /// Per rib, per end: the outermost x of the points found so far (negated at the low
+    /// end, so that larger is outer), outermost first; `-inf` where fewer were found.
+    outer: [[[f32; TIP_CANDIDATES]; 2]; 4],
 }
 
 impl Tips {
@@ -452,32 +509,52 @@ impl Tips {
         }
         Tips {
             ends,
-            far: [[0.0; 2]; 4],
+            outer: [[[f32::NEG_INFINITY; TIP_CANDIDATES]; 2]; 4],
         }
     }
 
     /// Takes a cloud point (fitting frame).
     fn add(&mut self, q: &Vec3) {
-        for (ends, far) in self.ends.iter().zip(self.far.iter_mut()) {
-            for ((end, dir), far) in ends.iter().zip(far.iter_mut()) {
+        for (ends, outer) in self.ends.iter().zip(self.outer.iter_mut()) {
+            for (((end, dir), outer), sign) in ends.iter().zip(outer.iter_mut()).zip([-1.0, 1.0]) {
                 let v = q - end;
                 let t = v.dot(dir);
-                if t > *far
-                    && t <= TIP_REACH_MM
+                let x = sign * q.x;
+                if t.abs() <= TIP_REACH_MM
                     && v.norm_squared() - t * t <= TIP_RADIUS_MM * TIP_RADIUS_MM
+                    && x > outer[TIP_CANDIDATES - 1]
                 {
-                    *far = t;
+                    // Insert, outermost first; the innermost kept drops out.
+                    let mut k = TIP_CANDIDATES - 1;
+                    while k > 0 && outer[k - 1] < x {
+                        outer[k] = outer[k - 1];
+                        k -= 1;
+                    }
+                    outer[k] = x;
                 }
             }
         }
     }
 
-    /// Rib `r`'s reach: the lowest and the highest x (the previous ends' own where no
-    /// point lies beyond them).
-    fn reach(&self, r: usize) -> [f32; 2] {
-        let [(e0, d0), (e1, d1)] = self.ends[r];
-        let [f0, f1] = self.far[r];
-        [e0.x + d0.x * f0, e1.x + d1.x * f1]
+    /// Rib `r`'s reach, the lowest and the highest x (each the previous end's own where
+    /// no point with support lies beyond it), for a rib whose points are `spacing` mm
+    /// apart in x on average.
+    fn reach(&self, r: usize, spacing: f32) -> [f32; 2] {
+        let gap = TIP_SUPPORT_SPACINGS * spacing;
+        let tip = |outer: &[f32; TIP_CANDIDATES]| {
+            // The outermost with support, and the innermost kept behind it.
+            let Some(i) = (0..TIP_CANDIDATES - 1).find(|&i| outer[i] - outer[i + 1] <= gap) else {
+                return f32::NEG_INFINITY;
+            };
+            let j = (i + 1..TIP_CANDIDATES)
+                .rev()
+                .find(|&j| outer[j].is_finite())
+                .unwrap_or(i + 1);
+            outer[i] + (outer[i] - outer[j]) / (j - i) as f32
+        };
+        let [(e0, _), (e1, _)] = self.ends[r];
+        let [o0, o1] = &self.outer[r];
+        [e0.x.min(-tip(o0)), e1.x.max(tip(o1))]
     }
 }
 
@@ -1035,16 +1112,25 @@ impl TargetSkeleton {
             GuidedStage::Fit(round) => {
                 let stride = fit_stride(cloud.len());
                 let ribs = self.ribs.as_mut().ok_or(Error::RigidFit)?;
+                // The points between two fitted ones only go to the tip search: with
+                // it, every point is walked; without, only the fitted ones.
+                let step = if ribs.tips.is_some() { 1 } else { stride };
                 let mut i = cursor;
-                for _ in 0..budget.saturating_mul(FIT_POINTS_PER_UNIT) {
+                let mut fitted = 0;
+                while fitted < budget.saturating_mul(FIT_POINTS_PER_UNIT) {
                     let Some(p) = cloud.get(i) else { break };
-                    let r2 = LABEL_RADIUS_MM * LABEL_RADIUS_MM;
-                    let label = match self.target_tree.nearest(&target.som1, p, r2) {
-                        Some((j, _)) => self.labels.get(j).copied().unwrap_or(0),
-                        None => 0,
-                    };
-                    ribs.add(label, p);
-                    i = i.saturating_add(stride);
+                    if i.is_multiple_of(stride) {
+                        let r2 = LABEL_RADIUS_MM * LABEL_RADIUS_MM;
+                        let label = match self.target_tree.nearest(&target.som1, p, r2) {
+                            Some((j, _)) => self.labels.get(j).copied().unwrap_or(0),
+                            None => 0,
+                        };
+                        ribs.add(label, p);
+                        fitted += 1;
+                    } else {
+                        ribs.see(p);
+                    }
+                    i = i.saturating_add(step);
                 }
                 self.cursor = i.min(cloud.len()) as u32;
                 if i >= cloud.len() {
@@ -1267,10 +1353,10 @@ mod tests {
     }
 
     #[test]
-    fn the_tip_search_takes_each_rib_on_to_its_farthest_point_near_the_end_ray() {
+    fn the_tip_search_takes_each_rib_on_to_its_outermost_supported_point() {
         // Straight ribs along x at y = -30 r; every rib's nodes from -80 to 80 mm (the
-        // sternum node at x = 0), its points (those past the nodes unlabelled, as a thin
-        // tip's are) as the cases below say.
+        // sternum node at x = 0), its points 0.5 mm apart (those past the nodes
+        // unlabelled, as a thin tip's are) as the cases below say.
         let on = |r: usize, x: f32| Vec3::new(x, -30.0 * r as f32, 0.0);
         let mut nodes = heapless::Vec::<Vec3, 16>::new();
         let mut labels = heapless::Vec::<u8, 16>::new();
@@ -1282,25 +1368,39 @@ mod tests {
         }
         nodes.push(Vec3::new(0.0, -45.0, 0.0)).unwrap();
         labels.push(1).unwrap();
+        // (label, point, whether the fits take it or only the tip search sees it).
         let mut points = std::vec::Vec::new();
         for (r, &rib) in RIBS.iter().enumerate() {
             // Ribs 2, 4, 5 reach ±100 mm; rib 3 only the nodes' ±80.
             let reach = if r == 1 { 80.0 } else { 100.0 };
-            for x in equal_steps(-reach, reach, 81) {
-                points.push((if x.abs() <= 80.0 { rib } else { 0 }, on(r, x)));
+            for x in equal_steps(-reach, reach, (4.0 * reach) as usize + 1) {
+                // Rib 2's outermost points are skipped by the fits' stride.
+                let fitted = r != 0 || x.abs() < 95.0;
+                points.push((if x.abs() <= 80.0 { rib } else { 0 }, on(r, x), fitted));
             }
         }
         // Not rib 3's tip: 9 mm off its ray (the tube is 8 mm); not rib 4's: 51 mm past
-        // its end (the search looks 30 mm on).
-        points.push((0, on(1, -95.0) + Vec3::new(0.0, 9.0, 0.0)));
-        points.push((0, on(2, 131.0)));
+        // its end (the search looks 30 mm on); not rib 5's: lone points 8 and 9 mm beyond
+        // the rest (support is 11 spacings, about 5.4 mm here).
+        points.push((0, on(1, -95.0) + Vec3::new(0.0, 9.0, 0.0), true));
+        points.push((0, on(2, 131.0), true));
+        points.push((0, on(3, 108.0), true));
+        points.push((0, on(3, -109.0), true));
+        // Rib 4's left tip goes on past 105.5 mm: two points, each within 5 mm of the
+        // next.
+        points.push((0, on(2, 103.0), true));
+        points.push((0, on(2, 105.5), true));
         let fitted = |tips: Option<&[Vec3; SKELETON_POINTS]>| {
             let mut fits = RibFits::new(&nodes, &labels, &Rigid::identity()).unwrap();
             if let Some(previous) = tips {
                 fits = fits.with_tips(previous);
             }
-            for (label, p) in &points {
-                fits.add(*label, p);
+            for (label, p, fitted) in &points {
+                if *fitted {
+                    fits.add(*label, p);
+                } else {
+                    fits.see(p);
+                }
             }
             let spans = fits.spans();
             (
@@ -1310,7 +1410,9 @@ mod tests {
         };
         let (first, spans) = fitted(None);
         let (second, spans_with_tips) = fitted(Some(&first));
-        // The nodes' extents: the first pass, and the coverage evidence either way.
+        // The nodes' extents: the first pass, and the coverage evidence either way. With
+        // the tips, each end goes one spacing beyond its outermost supported point: 0.5 mm
+        // (rib 4's left end: its 4 outermost, 99.5 to 105.5 mm, are 2 mm apart).
         assert_eq!(spans, [[80.0; 2]; 4]);
         assert_eq!(spans_with_tips, spans);
         let mut offset = 0;
@@ -1318,11 +1420,71 @@ mod tests {
             let (lo, hi) = (first[offset].x, first[offset + n - 1].x);
             assert!((lo + 80.0).abs() < 1e-3 && (hi - 80.0).abs() < 1e-3, "{r}");
             let (lo, hi) = (second[offset].x, second[offset + n - 1].x);
-            let reach = if r == 1 { 80.0 } else { 100.0 };
+            let reach = if r == 1 { 80.5 } else { 100.5 };
+            let right = if r == 2 { 107.5 } else { reach };
             assert!((lo + reach).abs() < 1e-3, "rib {}: {lo}", RIBS[r]);
-            assert!((hi - reach).abs() < 1e-3, "rib {}: {hi}", RIBS[r]);
+            assert!((hi - right).abs() < 1e-3, "rib {}: {hi}", RIBS[r]);
             offset += n;
         }
+    }
+
+    #[test]
+    fn fit_ribs_shows_every_point_to_the_tip_search() {
+        // One straight rib per label along x, nodes at ±80 mm, points about 0.5 mm apart
+        // out to ±99 (more than FIT_SAMPLES: the fits take every other one), and rib 2's
+        // outermost point on each side at an odd index: the tips reach it all the same
+        // (and one spacing of the points behind it beyond).
+        let on = |r: usize, x: f32| Vec3::new(x, -30.0 * r as f32, 0.0);
+        let mut nodes = heapless::Vec::<Vec3, 16>::new();
+        let mut labels = heapless::Vec::<u8, 16>::new();
+        for (r, &rib) in RIBS.iter().enumerate() {
+            for x in [-80.0, 80.0] {
+                nodes.push(on(r, x)).unwrap();
+                labels.push(rib).unwrap();
+            }
+        }
+        nodes.push(Vec3::new(0.0, -45.0, 0.0)).unwrap();
+        labels.push(1).unwrap();
+        let mut cloud = std::vec::Vec::new();
+        for r in 0..RIBS.len() {
+            cloud.extend(equal_steps(-99.0, 99.0, 400).map(|x| on(r, x)));
+        }
+        // The tips, at odd indices (the cloud has an even count so far), after points of
+        // no rib.
+        cloud.push(on(9, 0.0));
+        cloud.push(on(0, -101.0));
+        cloud.push(on(9, 0.0));
+        cloud.push(on(0, 101.0));
+        assert_eq!(fit_stride(cloud.len()), 2);
+        let label = |_: usize, p: &Vec3| {
+            let r = (-p.y / 30.0).round() as usize;
+            if p.x.abs() > 80.0 || r >= RIBS.len() {
+                0
+            } else {
+                RIBS[r]
+            }
+        };
+        let (skeleton, _) = fit_ribs(
+            &cloud,
+            &nodes,
+            &labels,
+            &Rigid::identity(),
+            label,
+            Some(&[0.5; 4]),
+            Cloud::Template,
+            true,
+        )
+        .unwrap();
+        let n = RIB_SAMPLES[0];
+        // 101 mm and a third of the way from 98 mm (the fourth outermost) on.
+        assert!((skeleton[0].x + 102.0).abs() < 1e-2, "{:?}", skeleton[0]);
+        assert!(
+            (skeleton[n - 1].x - 102.0).abs() < 1e-2,
+            "{:?}",
+            skeleton[n - 1]
+        );
+        // Rib 3's outermost points sit at even indices or odd alike: ±99 mm and a spacing.
+        assert!((skeleton[n].x + 99.5).abs() < 1e-2, "{:?}", skeleton[n]);
     }
 
     #[test]

@@ -30,7 +30,7 @@ use super::{
 };
 
 /// The version this module writes and reads.
-pub const PREPARED_VERSION: u32 = 2;
+pub const PREPARED_VERSION: u32 = 3;
 /// Skeleton points in a prepared template (ribs 2..5 with 6, 6, 8, 10 points).
 pub const PREPARED_SKELETON: usize = 30;
 /// Most SOM-1 nodes a prepared template may hold (the core's SOM-1 capacity).
