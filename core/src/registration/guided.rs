@@ -1352,22 +1352,33 @@ mod tests {
         assert_eq!(points[RIB_SAMPLES[0]..], observed[RIB_SAMPLES[0]..]);
     }
 
-    #[test]
-    fn the_tip_search_takes_each_rib_on_to_its_outermost_supported_point() {
-        // Straight ribs along x at y = -30 r; every rib's nodes from -80 to 80 mm (the
-        // sternum node at x = 0), its points 0.5 mm apart (those past the nodes
-        // unlabelled, as a thin tip's are) as the cases below say.
-        let on = |r: usize, x: f32| Vec3::new(x, -30.0 * r as f32, 0.0);
-        let mut nodes = heapless::Vec::<Vec3, 16>::new();
-        let mut labels = heapless::Vec::<u8, 16>::new();
+    /// Point `x` mm along straight rib `r` (index into [`RIBS`]), at y = -30 r.
+    fn straight_rib(r: usize, x: f32) -> Vec3 {
+        Vec3::new(x, -30.0 * r as f32, 0.0)
+    }
+
+    /// Each straight rib's nodes at ±80 mm, labelled, and a sternum node at x = 0.
+    fn straight_rib_nodes() -> (heapless::Vec<Vec3, 16>, heapless::Vec<u8, 16>) {
+        let mut nodes = heapless::Vec::new();
+        let mut labels = heapless::Vec::new();
         for (r, &rib) in RIBS.iter().enumerate() {
             for x in [-80.0, 80.0] {
-                nodes.push(on(r, x)).unwrap();
+                nodes.push(straight_rib(r, x)).unwrap();
                 labels.push(rib).unwrap();
             }
         }
         nodes.push(Vec3::new(0.0, -45.0, 0.0)).unwrap();
         labels.push(1).unwrap();
+        (nodes, labels)
+    }
+
+    #[test]
+    fn the_tip_search_takes_each_rib_on_to_its_outermost_supported_point() {
+        // Straight ribs along x at y = -30 r; every rib's nodes from -80 to 80 mm (the
+        // sternum node at x = 0), its points 0.5 mm apart (those past the nodes
+        // unlabelled, as a thin tip's are) as the cases below say.
+        let on = straight_rib;
+        let (nodes, labels) = straight_rib_nodes();
         // (label, point, whether the fits take it or only the tip search sees it).
         let mut points = std::vec::Vec::new();
         for (r, &rib) in RIBS.iter().enumerate() {
@@ -1434,17 +1445,8 @@ mod tests {
         // out to ±99 (more than FIT_SAMPLES: the fits take every other one), and rib 2's
         // outermost point on each side at an odd index: the tips reach it all the same
         // (and one spacing of the points behind it beyond).
-        let on = |r: usize, x: f32| Vec3::new(x, -30.0 * r as f32, 0.0);
-        let mut nodes = heapless::Vec::<Vec3, 16>::new();
-        let mut labels = heapless::Vec::<u8, 16>::new();
-        for (r, &rib) in RIBS.iter().enumerate() {
-            for x in [-80.0, 80.0] {
-                nodes.push(on(r, x)).unwrap();
-                labels.push(rib).unwrap();
-            }
-        }
-        nodes.push(Vec3::new(0.0, -45.0, 0.0)).unwrap();
-        labels.push(1).unwrap();
+        let on = straight_rib;
+        let (nodes, labels) = straight_rib_nodes();
         let mut cloud = std::vec::Vec::new();
         for r in 0..RIBS.len() {
             cloud.extend(equal_steps(-99.0, 99.0, 400).map(|x| on(r, x)));
