@@ -178,7 +178,9 @@ fn a_hard_sweep_turned_in_its_plane_comes_out_as_unturned() {
     // axis (a shallow ICP minimum: the cartilages are near-parallel curves), and before the
     // refined pose was also tried turned by ±12°, every yaw but 0° (where the identity start
     // lands near the truth) was refused ("rib 5 not seen") or mapped more than 30 mm off.
-    for seed in [6, 12, 14] {
+    // Seed 31's turned sweeps ended in a minimum 3.3° from the unturned one's, which ±12°
+    // does not reach: 16.5 mm off, accepted (a silent failure), before the ±4° turns.
+    for seed in [6, 12, 14, 31] {
         let p = PhantomPair::generate(&PhantomConfig {
             seed,
             preset: Preset::Hard,

@@ -322,6 +322,11 @@ impl Icp {
         self.pose
     }
 
+    /// Whether at least one iteration's fit has moved the pose.
+    pub fn fitted(&self) -> bool {
+        self.iteration > 0
+    }
+
     /// RMS distance of the last complete pairing (infinite before the first).
     pub fn rms(&self) -> f32 {
         self.rms
