@@ -1219,8 +1219,9 @@ impl TargetSkeleton {
                 )?;
                 let h = usize::from(self.hypothesis);
                 // The pose a turn turned (none for the coarse hypotheses).
-                let base = PoseConfidence::choose(&self.refined[..CANDIDATES])
-                    .filter(|_| h >= CANDIDATES)
+                let base = (h >= CANDIDATES)
+                    .then(|| PoseConfidence::choose(&self.refined[..CANDIDATES]))
+                    .flatten()
                     .map(|(base, _)| base);
                 // A turn back within RETURNING_DEG of it is heading for its minimum: stopped.
                 let returning = self.icp.fitted()
