@@ -203,8 +203,8 @@ fn a_hard_sweep_turned_in_its_plane_comes_out_as_unturned() {
 /// A patient far from the template's shape is registered, not refused: hard phantoms 4
 /// and 38 (long sternums, ±20 % cartilages) end their right pose at a node residual of
 /// 7.9–8.5 mm, and the 7 mm bound that the standard phantoms had set refused them at
-/// every pose (checked: this test fails with it) (`guided::MAX_POSE_RESIDUAL_MM`, README "A residual bound for the patient's
-/// shape").
+/// every pose; this test fails with it (`guided::MAX_POSE_RESIDUAL_MM`, README "A
+/// residual bound for the patient's shape").
 #[test]
 fn a_patient_far_from_the_template_s_shape_is_registered() {
     for seed in [4, 38] {

@@ -688,11 +688,11 @@ pub const STERNUM_CANDIDATES: usize = 16;
 /// The midline goes on over the unlabelled nodes that continue it beyond either end: of
 /// those within [`STERNUM_TUBE_MM`] of a parabola `x(y)`, `z(y)` fitted to the labelled
 /// nodes and at most [`STERNUM_REACH_MM`] beyond the end, the ones reached from it in
-/// steps of at most [`LABEL_RADIUS_MM`] join the line's fit. A target node is labelled only within [`LABEL_RADIUS_MM`]
-/// of a carried template node, so the nodes of a xiphoid longer than the template's
-/// stayed unlabelled, and the stations stopped 11–42 mm above the patient's xiphoid tip
-/// (hard phantoms 0–11; the template's nodes are all labelled, so its midline is the
-/// same as before). Measured with `ribreg eval --preset both --ours-only --pairs 50`:
+/// steps of at most [`LABEL_RADIUS_MM`] join the line's fit. A target node is labelled
+/// only within [`LABEL_RADIUS_MM`] of a carried template node, so the nodes of a xiphoid
+/// longer than the template's stayed unlabelled, and the stations stopped 11–42 mm above
+/// the patient's xiphoid tip (hard phantoms 0–11; the template's nodes are all labelled,
+/// so its midline is the same as before). Measured with `ribreg eval --preset both --ours-only --pairs 50`:
 /// hard dense error 4.25 → 3.89 mm (aligned; the sternum's points 7.36 → 5.94 mm), the
 /// waypoints unchanged (2.144 → 2.152 mm, standard 1.211 the same). Stations on the
 /// bent midline itself (the parabola the band follows) took the sternum to 5.43 mm but
@@ -814,7 +814,7 @@ impl SternumLine {
     /// within [`STERNUM_TUBE_MM`] of it and at most [`STERNUM_REACH_MM`] beyond an end,
     /// the [`STERNUM_CANDIDATES`] nearest the end; those reached from the end in steps of
     /// at most [`LABEL_RADIUS_MM`] join the fit (a lone node farther out, an outlier, is
-    /// not sternum). One pass, no buffer.
+    /// not sternum). One pass; the candidates are kept on the stack.
     fn extend(&mut self, unlabelled: impl Iterator<Item = Vec3>) {
         let Some((c, origin)) = self.curve(true) else {
             return;
