@@ -669,9 +669,10 @@ pub const STERNUM_TUBE_MM: f32 = 8.0;
 /// at 20, and a manubrium is 15–35 mm tall.
 pub const STERNUM_REACH_MM: f32 = 60.0;
 /// Unlabelled nodes kept per end of the sternum's midline, nearest first: SOM-1 nodes lie
-/// two to four abreast on the sternum, about 8 mm apart, so 16 reach 30–60 mm (with 8,
-/// hard phantom 3's midline stopped 14 mm short of its xiphoid's tip, with 16 and 32 at
-/// the same place, 6 mm short); 2 × 16 × 16 B of stack.
+/// two to four abreast on the sternum, about 8 mm apart, so 16 reach 30–60 mm (with a
+/// straight band, while it was tried: with 8, hard phantom 3's midline stopped 14 mm
+/// short of its xiphoid's tip, with 16 and with 32 at its lowest node, 7 mm short);
+/// 2 × 16 × 16 B of stack.
 pub const STERNUM_CANDIDATES: usize = 16;
 
 /// [`STERNUM_STATIONS`] points on the sternum's midline, from the SOM-1 `nodes` labelled
