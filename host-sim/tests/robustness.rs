@@ -208,21 +208,27 @@ fn a_hard_sweep_turned_in_its_plane_comes_out_as_unturned() {
 #[test]
 fn a_patient_far_from_the_template_s_shape_is_registered() {
     for seed in [4, 38] {
-        let p = PhantomPair::generate(&PhantomConfig {
-            seed,
-            preset: Preset::Hard,
-            variant: Variant::Aligned,
-            ..PhantomConfig::default()
-        });
-        for case in [Case::Yaw(0), Case::Yaw(90)] {
-            let max = run(&case.apply(&p, seed))
-                .unwrap_or_else(|e| panic!("seed {seed}, {}: refused: {e}", case.name()));
-            assert!(
-                max <= SILENT_FAILURE_MM,
-                "seed {seed}, {}: {max:.1} mm",
-                case.name()
-            );
-        }
+        hard_sweep_registered_within_the_line(seed, &[Case::Yaw(0), Case::Yaw(90)]);
+    }
+}
+
+/// Hard phantom `seed` (aligned), in each of `cases`, is registered with every waypoint
+/// within `SILENT_FAILURE_MM`.
+fn hard_sweep_registered_within_the_line(seed: u64, cases: &[Case]) {
+    let p = PhantomPair::generate(&PhantomConfig {
+        seed,
+        preset: Preset::Hard,
+        variant: Variant::Aligned,
+        ..PhantomConfig::default()
+    });
+    for case in cases {
+        let max = run(&case.apply(&p, seed))
+            .unwrap_or_else(|e| panic!("seed {seed}, {}: refused: {e}", case.name()));
+        assert!(
+            max <= SILENT_FAILURE_MM,
+            "seed {seed}, {}: {max:.1} mm",
+            case.name()
+        );
     }
 }
 
@@ -234,20 +240,5 @@ fn a_patient_far_from_the_template_s_shape_is_registered() {
 /// waypoint is 8.8 mm off (README "Pose turns that walk downhill").
 #[test]
 fn pose_turns_start_from_the_best_pose_so_far() {
-    let seed = 21;
-    let p = PhantomPair::generate(&PhantomConfig {
-        seed,
-        preset: Preset::Hard,
-        variant: Variant::Aligned,
-        ..PhantomConfig::default()
-    });
-    for case in [Case::Yaw(90), Case::Rotation(2)] {
-        let max = run(&case.apply(&p, seed))
-            .unwrap_or_else(|e| panic!("seed {seed}, {}: refused: {e}", case.name()));
-        assert!(
-            max <= SILENT_FAILURE_MM,
-            "seed {seed}, {}: {max:.1} mm",
-            case.name()
-        );
-    }
+    hard_sweep_registered_within_the_line(21, &[Case::Yaw(90), Case::Rotation(2)]);
 }
