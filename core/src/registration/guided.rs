@@ -16,9 +16,9 @@
 //!    [`crate::registration::endpoints::CoarsePose`] from nine starts (no initial
 //!    alignment needed) keeps its best [`CANDIDATES`] distinct poses; each is refined by
 //!    ICP of all target SOM-1 nodes onto the template's, and so is the best pose so far
-//!    turned by each of [`TURNS_DEG`] in turn about the template's anterior axis; the lowest
-//!    refined RMS wins ([`PoseConfidence`]: a flipped pose pairs the nodes with the wrong
-//!    cartilage, and its residual stays well above the right one's);
+//!    turned by each of [`TURNS_DEG`] in turn about the template's anterior axis; the
+//!    lowest refined RMS wins ([`PoseConfidence`]: a flipped pose pairs the nodes with
+//!    the wrong cartilage, and its residual stays well above the right one's);
 //! 2. the template nodes are carried into the target frame (first by that pose, in later
 //!    rounds by the current local-rigid mapping) and every target node takes the label of
 //!    the nearest carried template node within [`LABEL_RADIUS_MM`] (farther nodes, e.g.
@@ -114,10 +114,10 @@ pub const MIN_POSE_MARGIN: f32 = 1.25;
 /// turned far less ([`RETURNING_DEG`]).
 ///
 /// Each turn starts from the best pose refined so far, a turn's among them, so the turns
-/// walk downhill: hard phantom 21, turned by any yaw or rotation, ended in a minimum
-/// 3° (mostly about the cranial axis) from the unturned sweep's (node residual 6.38 mm against
-/// 4.67; waypoints 10.4 mm off, accepted: a silent failure at 20 poses), because its
-/// +12° turn found a better minimum and the ±4° turns still started from the coarse
+/// walk downhill: hard phantom 21, turned by any yaw or rotation, ended in a minimum 3°
+/// (mostly about the cranial axis) from the unturned sweep's (node residual 6.38 mm
+/// against 4.67; waypoints 10.4 mm off, accepted: a silent failure at 20 poses), because
+/// its +12° turn found a better minimum and the ±4° turns still started from the coarse
 /// pose; from the +12° turn's pose a +4° turn reaches 4.99 mm, 0.6° from the unturned
 /// minimum. `eval --robustness --preset hard --ours-only --pairs 50`: silent failures
 /// 26 → 6 of 1,300 complete runs (phantom 21's turned runs 8.8 mm off), refusals 126 →
