@@ -122,7 +122,8 @@ pub const MIN_POSE_MARGIN: f32 = 1.25;
 /// minimum. `eval --robustness --preset hard --ours-only --pairs 50`: silent failures
 /// 26 → 6 of 1,300 complete runs (phantom 21's turned runs 8.8 mm off), refusals 126 →
 /// 123; `eval --preset both --ours-only --pairs 50` unchanged but for 0.001–0.002 mm
-/// (hard). Repeating the ±4° pair from a pose it improved changed none of these runs.
+/// (hard). Repeating the ±4° pair from a pose it improved changed one run of these
+/// (phantom 28 at yaw 45°, 5.2 → 4.8 mm).
 pub const TURNS_DEG: [f32; 4] = [-12.0, 12.0, -4.0, 4.0];
 /// A turn whose refined pose ends within this of the pose it turned found the same
 /// minimum and is dropped, degrees: the minima a turn is for lie 9–16° apart, and on
