@@ -175,6 +175,44 @@ const PROJECTION_ITERATIONS: usize = 8;
 const BISECTION_ITERATIONS: usize = 80;
 /// Random draws tried by [`SubjectParams::random`] before it shrinks toward the template.
 const MAX_DRAW_ATTEMPTS: usize = 64;
+/// The stretch of s, each way from a waypoint's, whose cartilage cross-sections
+/// [`Gap`]'s window is measured against (a tenth of a cartilage is 6–12 mm; a section
+/// further along does not come nearer the window on these phantoms:
+/// `tests::phantom_waypoint_gaps_end_at_the_cartilages_outlines` checks ±0.2).
+const GAP_S_REACH: f64 = 0.1;
+/// Cross-sections in that stretch, both ways together (one per 0.001 of s: 0.06–0.12 mm
+/// apart along the cartilage).
+const GAP_SECTIONS: usize = 200;
+
+/// The window between two ribs a planned waypoint lies in ([`SubjectGeometry::waypoint_gaps`],
+/// [`PhantomPair::true_gaps`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Gap {
+    /// Unit direction in the chest's plane (perpendicular to the patient's anterior axis)
+    /// from the upper rib's centreline toward the lower rib's, at the waypoint's s.
+    pub across: [f64; 3],
+    /// How far the waypoint may move against `across` before its centre is over the upper
+    /// cartilage (mm).
+    pub to_upper: f64,
+    /// How far it may move along `across` before it is over the lower cartilage (mm).
+    pub to_lower: f64,
+}
+
+impl Gap {
+    /// A mapped waypoint's error `e` (mapped − true) split: its component across the gap
+    /// (signed, toward the lower rib positive) and the clearance left to the nearer
+    /// cartilage's outline that way (negative: the probe's centre is over a cartilage).
+    pub fn split(&self, e: [f64; 3]) -> (f64, f64) {
+        let across = dot(e, self.across);
+        let clearance = if across >= 0.0 {
+            self.to_lower - across
+        } else {
+            self.to_upper + across
+        };
+        (across, clearance)
+    }
+}
+
 /// The planned intercostal waypoints per side: (upper rib of the gap, s along both
 /// cartilages). Gap 2–3 at s = 0.35 and 0.7, gap 3–4 at 0.35 and 0.7, gap 4–5 at 0.5.
 pub const WAYPOINT_PLAN: [(u8, f64); 5] = [(2, 0.35), (2, 0.7), (3, 0.35), (3, 0.7), (4, 0.5)];
@@ -601,6 +639,19 @@ impl PhantomPair {
             });
         self.pose
             .apply(SubjectGeometry::new(&self.patient_params).position(&m))
+    }
+
+    /// The windows of the true waypoints ([`SubjectGeometry::waypoint_gaps`] of the
+    /// patient, turned into the target frame; same order as `true_waypoints`).
+    pub fn true_gaps(&self) -> Vec<Gap> {
+        SubjectGeometry::new(&self.patient_params)
+            .waypoint_gaps()
+            .into_iter()
+            .map(|g| Gap {
+                across: self.pose.apply_vector(g.across),
+                ..g
+            })
+            .collect()
     }
 
     /// [`PhantomPair::true_position`] of every template point (solves the patient's

@@ -469,6 +469,78 @@ impl SubjectGeometry {
         }
         out
     }
+
+    /// How far from `from` along the unit `toward` (both in the chest's plane) the ray
+    /// enters `part`'s outline seen along the anterior axis: the least entry over its
+    /// cross-sections from `s − GAP_S_REACH` to `s + GAP_S_REACH` (a sloped cartilage's
+    /// neighbouring sections reach the ray before its own does). Each section is an
+    /// ellipse, `c + n1 a cos φ + n2 b sin φ`, whose projection is the 2-D ellipse through
+    /// its points at φ = 0 and π/2; the entry solves a quadratic in its unit-circle frame.
+    /// Infinite where the ray meets no section.
+    fn outline_entry(&self, part: Part, s: f64, from: P3, toward: P3) -> f64 {
+        let xy = |p: P3| [p[0], p[1]];
+        (0..=GAP_SECTIONS)
+            .map(|k| s + GAP_S_REACH * (2.0 * k as f64 / GAP_SECTIONS as f64 - 1.0))
+            .filter(|si| (0.0..=1.0).contains(si))
+            .filter_map(|si| {
+                let c = self.centerline(part, si);
+                let at = |phi| xy(sub(self.position(&Material { part, s: si, phi }), c));
+                let (m1, m2) = (at(0.0), at(FRAC_PI_2));
+                let det = m1[0] * m2[1] - m1[1] * m2[0];
+                if det.abs() < 1e-9 {
+                    return None;
+                }
+                // M⁻¹ of M = [m1 m2] (columns), applied to a 2-vector.
+                let inv = |v: [f64; 2]| {
+                    [
+                        (m2[1] * v[0] - m2[0] * v[1]) / det,
+                        (m1[0] * v[1] - m1[1] * v[0]) / det,
+                    ]
+                };
+                let (u, v) = (inv(xy(toward)), inv(xy(sub(from, c))));
+                let (uu, uv, vv) = (
+                    u[0] * u[0] + u[1] * u[1],
+                    u[0] * v[0] + u[1] * v[1],
+                    v[0] * v[0] + v[1] * v[1],
+                );
+                let disc = uv * uv - uu * (vv - 1.0);
+                let t = (-uv - disc.sqrt()) / uu;
+                (disc >= 0.0 && t > 0.0).then_some(t)
+            })
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    /// The window each of [`SubjectGeometry::waypoints`] must land in (same order, patient
+    /// frame), seen along the patient's anterior axis as the probe sees it: the unit
+    /// direction in the chest's plane (z left out) from rib `upper`'s centreline point at
+    /// `s` toward rib `upper + 1`'s, and how far the waypoint may move along it either way
+    /// before its centre is over a cartilage (to the cross-sections' outlines at `s`). A
+    /// mapped waypoint's error along that direction is what moves the probe toward a rib.
+    pub fn waypoint_gaps(&self) -> Vec<Gap> {
+        let waypoints = self.waypoints();
+        let mut out = Vec::with_capacity(waypoints.len());
+        for (side, w) in Side::BOTH
+            .iter()
+            .flat_map(|&side| WAYPOINT_PLAN.iter().map(move |p| (side, p)))
+            .zip(&waypoints)
+        {
+            let (side, &(upper, s)) = side;
+            let a = Part::Cartilage { rib: upper, side };
+            let b = Part::Cartilage {
+                rib: upper + 1,
+                side,
+            };
+            let (ca, cb) = (self.centerline(a, s), self.centerline(b, s));
+            let d = sub(cb, ca);
+            let across = normalize_or([d[0], d[1], 0.0], [0.0, -1.0, 0.0]);
+            out.push(Gap {
+                across,
+                to_upper: self.outline_entry(a, s, *w, mul(across, -1.0)),
+                to_lower: self.outline_entry(b, s, *w, across),
+            });
+        }
+        out
+    }
 }
 
 /// Smallest distance from any point of `a` to the polyline `b`.

@@ -364,6 +364,80 @@ fn phantom_waypoints_lie_between_ribs() {
     }
 }
 
+/// Each waypoint's window, checked against the cartilages' surfaces sampled densely over
+/// a stretch of s about the waypoint's (not only the cross-section at its s): seen along
+/// the anterior axis, the window's ends touch the two outlines, and the segment between
+/// them, 0.5 mm short of each end, is clear of both.
+#[test]
+fn phantom_waypoint_gaps_end_at_the_cartilages_outlines() {
+    let subjects = [
+        SubjectParams::template(),
+        SubjectParams::random_for(3, Preset::Hard, &[]),
+        SubjectParams::random_for(11, Preset::Hard, &[]),
+    ];
+    for params in subjects {
+        let geom = SubjectGeometry::new(&params);
+        let gaps = geom.waypoint_gaps();
+        for ((i, w), g) in geom.waypoints().iter().enumerate().zip(&gaps) {
+            let side = Side::BOTH[i / 5];
+            let (upper, s) = WAYPOINT_PLAN[i % 5];
+            assert!((norm(g.across) - 1.0).abs() < 1e-9 && g.across[2] == 0.0);
+            assert!(g.across[1] < -0.8, "across {:?} not caudal", g.across);
+            assert!(g.to_upper > 3.0 && g.to_lower > 3.0, "{g:?}");
+            // The outline's points in the chest's plane (z dropped), 0.2 mm apart or less.
+            let outline = |rib: u8| -> Vec<[f64; 2]> {
+                let part = Part::Cartilage { rib, side };
+                let mut v = vec![];
+                for k in 0..=400 {
+                    let si = s - 0.2 + 0.4 * k as f64 / 400.0;
+                    for j in 0..256 {
+                        let p = geom.position(&Material {
+                            part,
+                            s: si,
+                            phi: 2.0 * PI * j as f64 / 256.0,
+                        });
+                        v.push([p[0], p[1]]);
+                    }
+                }
+                v
+            };
+            let (a, b) = (outline(upper), outline(upper + 1));
+            let gap_to = |pts: &[[f64; 2]], t: f64| {
+                let q = add(*w, mul(g.across, t));
+                pts.iter()
+                    .map(|p| ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt())
+                    .fold(f64::INFINITY, f64::min)
+            };
+            assert!(
+                gap_to(&b, g.to_lower) < 0.4,
+                "waypoint {i}: lower end off the outline"
+            );
+            assert!(
+                gap_to(&a, -g.to_upper) < 0.4,
+                "waypoint {i}: upper end off the outline"
+            );
+            for k in 0..=20 {
+                let t = -(g.to_upper - 0.5) + (g.to_upper + g.to_lower - 1.0) * k as f64 / 20.0;
+                assert!(
+                    gap_to(&a, t).min(gap_to(&b, t)) > 0.25,
+                    "waypoint {i}: the window is not clear {t:.1} mm across"
+                );
+            }
+        }
+        // Moved across by e, the clearance shrinks by e toward that rib.
+        let g = gaps[0];
+        let close = |(a, c): (f64, f64), (a0, c0): (f64, f64)| {
+            assert!((a - a0).abs() < 1e-12 && (c - c0).abs() < 1e-12, "{a} {c}");
+        };
+        close(g.split(mul(g.across, 2.0)), (2.0, g.to_lower - 2.0));
+        close(g.split(mul(g.across, -2.0)), (-2.0, g.to_upper - 2.0));
+        // Moved along the gap or in depth, nothing changes across it.
+        let along = [-g.across[1], g.across[0], 0.0];
+        let (across, clearance) = g.split(add(mul(along, 7.0), [0.0, 0.0, 5.0]));
+        assert!(across.abs() < 1e-12 && (clearance - g.to_lower).abs() < 1e-12);
+    }
+}
+
 #[test]
 fn phantom_mesh_is_outward_wound() {
     let geom = SubjectGeometry::new(&SubjectParams::template());
