@@ -107,6 +107,12 @@ pub struct CaseResult {
     pub dense_along_cartilage: Vec<f64>,
     /// Per-waypoint errors (mm), waypoint order.
     pub waypoint_errors: Vec<f64>,
+    /// The same errors' component across the gap ([`crate::phantom::Gap::across`], mm, unsigned): what
+    /// moves the probe toward a rib.
+    pub waypoint_across_gap: Vec<f64>,
+    /// Per waypoint, the clearance [`crate::phantom::Gap::split`] leaves (mm): how far the probe's centre
+    /// stays from the outline of the cartilage it moved toward; negative, it is over one.
+    pub waypoint_clearance: Vec<f64>,
     /// Wall time of the registration and mapping (ms).
     pub runtime_ms: f64,
 }
@@ -121,6 +127,9 @@ pub const STRUCTURES: [(&str, i32); 5] = [
 ];
 /// Stretches along the cartilage of [`CaseResult::dense_along_cartilage`].
 pub const ALONG_BINS: usize = 5;
+/// Half the window a probe must land in between two ribs (the ~5 mm of clinical
+/// tolerance), mm: the error across the gap counted as beyond it.
+pub const HALF_WINDOW_MM: f64 = 2.5;
 
 /// The position class of waypoint `i` (index into [`WAYPOINT_PLAN`]; both sides share
 /// one): "gap 2–3, medial (s 0.35)".
@@ -199,6 +208,8 @@ fn evaluate(m: EvalMethod, pair: &PhantomPair, variant: Variant, seed: u64) -> C
         dense_by_structure: vec![],
         dense_along_cartilage: vec![],
         waypoint_errors: vec![],
+        waypoint_across_gap: vec![],
+        waypoint_clearance: vec![],
         runtime_ms: f64::NAN,
     };
     match run_method(m, pair) {
@@ -228,6 +239,15 @@ fn evaluate(m: EvalMethod, pair: &PhantomPair, variant: Variant, seed: u64) -> C
                 .zip(&pair.true_waypoints)
                 .map(|(a, b)| dist(a, b))
                 .collect();
+            (r.waypoint_across_gap, r.waypoint_clearance) = wps
+                .iter()
+                .zip(&pair.true_waypoints)
+                .zip(pair.true_gaps())
+                .map(|((a, b), g)| {
+                    let (across, clearance) = g.split([a[0] - b[0], a[1] - b[1], a[2] - b[2]]);
+                    (across.abs(), clearance)
+                })
+                .unzip();
             r.runtime_ms = ms;
         }
     }
@@ -396,15 +416,31 @@ fn rows<'a>(
 
 /// Per-waypoint errors of a method, in (seed, waypoint) order, failed cases left out.
 fn waypoint_errors(results: &[CaseResult], m: &str, v: Group) -> Vec<(u64, usize, f64)> {
+    per_waypoint(results, m, v, |r| &r.waypoint_errors)
+}
+
+/// `field` of every waypoint of a method's cases, in (seed, waypoint) order, failed cases
+/// left out.
+fn per_waypoint(
+    results: &[CaseResult],
+    m: &str,
+    v: Group,
+    field: fn(&CaseResult) -> &[f64],
+) -> Vec<(u64, usize, f64)> {
     rows(results, m, v)
         .filter(|r| r.error.is_none())
         .flat_map(|r| {
-            r.waypoint_errors
+            field(r)
                 .iter()
                 .enumerate()
                 .map(move |(i, &e)| (r.seed, i, e))
         })
         .collect()
+}
+
+/// The values of [`per_waypoint`] alone.
+fn values(w: &[(u64, usize, f64)]) -> Vec<f64> {
+    w.iter().map(|w| w.2).collect()
 }
 
 fn summary_json(cfg: &EvalConfig, results: &[CaseResult]) -> Value {
@@ -432,6 +468,9 @@ fn summary_json(cfg: &EvalConfig, results: &[CaseResult]) -> Value {
                     "hd": Summary::of(&ok.iter().map(|r| r.hd).collect::<Vec<_>>()),
                     "dense_mean": Summary::of(&ok.iter().map(|r| r.dense.mean).collect::<Vec<_>>()),
                     "waypoint": Summary::of(&wp),
+                    "waypoint_across_gap": Summary::of(&values(&per_waypoint(results, &name, v, |r| &r.waypoint_across_gap))),
+                    "waypoints_over_a_cartilage": per_waypoint(results, &name, v, |r| &r.waypoint_clearance)
+                        .iter().filter(|w| w.2 < 0.0).count(),
                     "runtime_ms_median": rt.get(rt.len() / 2),
                     "t_test_vs_ours": t_test(results, &cfg.methods[0].name(), &name, v),
                 }),
@@ -526,6 +565,7 @@ fn markdown(cfg: &EvalConfig, results: &[CaseResult]) -> String {
         }
         let _ = writeln!(s);
     }
+    across_the_gap(&mut s, cfg, results);
     breakdown(&mut s, cfg, results);
     let failures: Vec<&CaseResult> = results.iter().filter(|r| r.error.is_some()).collect();
     if !failures.is_empty() {
@@ -568,6 +608,27 @@ fn figures(cfg: &EvalConfig, results: &[CaseResult], out: &Path) -> Result<(), C
             "waypoint error (mm)",
             &series,
             Some((5.0, "clinical tolerance 5 mm")),
+        )
+        .map_err(fig)?;
+        let across: Vec<Series> = cfg
+            .methods
+            .iter()
+            .map(|m| Series {
+                label: m.name(),
+                values: values(&per_waypoint(results, &m.name(), v, |r| {
+                    &r.waypoint_across_gap
+                })),
+            })
+            .collect();
+        plot::error_distributions(
+            &out.join(format!("waypoint_across_gap_{}_{}", v.0, v.1)),
+            &format!(
+                "Waypoint error across the gap, toward a rib ({} phantoms, {} pairs)",
+                v.0, v.1
+            ),
+            "error across the gap (mm)",
+            &across,
+            Some((HALF_WINDOW_MM, "half a 5 mm window")),
         )
         .map_err(fig)?;
         // Where along the cartilage the first method's dense error sits.
@@ -629,6 +690,49 @@ fn figures(cfg: &EvalConfig, results: &[CaseResult], out: &Path) -> Result<(), C
         .filter_map(|&m| run_method(m, &pair).ok().map(|(_, w, _)| (m.name(), w)))
         .collect();
     write_figures(out, &tpl, &tgt, &outcome, &pair.true_waypoints, &mapped)
+}
+
+/// Every method's waypoint error across the gap, one column per (preset, variant) group.
+fn across_the_gap(s: &mut String, cfg: &EvalConfig, results: &[CaseResult]) {
+    let groups = groups(cfg);
+    let head = groups
+        .iter()
+        .map(|g| format!("{}, {}", g.0, g.1))
+        .collect::<Vec<_>>()
+        .join(" | ");
+    let rule = "|---".repeat(groups.len() + 1) + "|";
+    let _ = writeln!(
+        s,
+        "### Waypoint error across the gap\n\nThe component of each waypoint's error toward \
+         a neighbouring rib (in the chest's plane, between the two cartilages' centrelines \
+         at the waypoint, as the probe sees them): mean ± SD / max (mm), the share beyond \
+         {HALF_WINDOW_MM} mm (half a 5 mm window), and the waypoints whose centre lands over \
+         a cartilage (past its outline; in brackets the least clearance left, mm).\n\n\
+         | method | {head} |\n{rule}"
+    );
+    for m in &cfg.methods {
+        let name = m.name();
+        let cells: Vec<String> = groups
+            .iter()
+            .map(|&g| {
+                let e = values(&per_waypoint(results, &name, g, |r| &r.waypoint_across_gap));
+                let c = values(&per_waypoint(results, &name, g, |r| &r.waypoint_clearance));
+                let sum = Summary::of(&e);
+                let beyond = e.iter().filter(|&&x| x > HALF_WINDOW_MM).count();
+                format!(
+                    "{:.2} ± {:.2} / {:.1}, {:.1} %, {} ({:.1})",
+                    sum.mean,
+                    sum.sd,
+                    sum.max,
+                    100.0 * beyond as f64 / e.len().max(1) as f64,
+                    c.iter().filter(|&&x| x < 0.0).count(),
+                    c.iter().copied().fold(f64::INFINITY, f64::min),
+                )
+            })
+            .collect();
+        let _ = writeln!(s, "| {name} | {} |", cells.join(" | "));
+    }
+    let _ = writeln!(s);
 }
 
 /// The first method's waypoint error by position and dense error by structure, one

@@ -153,11 +153,17 @@ fn run_on<P: Port>(
 }
 
 fn print_report(r: &HilReport, budgets: Option<&(Board, Budgets)>) {
-    println!("waypoint  mapped (x, y, z) mm               quality  probe error");
+    println!("waypoint  mapped (x, y, z) mm               quality  probe error  across the gap  clearance");
     for (i, w) in r.waypoints.iter().enumerate() {
         println!(
-            "{i:>8}  ({:8.2}, {:8.2}, {:8.2})  {:6.2} mm  {:6.2} mm",
-            w.mapped[0], w.mapped[1], w.mapped[2], w.quality_mm, w.error_mm
+            "{i:>8}  ({:8.2}, {:8.2}, {:8.2})  {:6.2} mm  {:6.2} mm    {:+6.2} mm    {:6.2} mm",
+            w.mapped[0],
+            w.mapped[1],
+            w.mapped[2],
+            w.quality_mm,
+            w.error_mm,
+            w.across_gap_mm,
+            w.clearance_mm
         );
     }
     let mean =
@@ -184,12 +190,15 @@ fn print_report(r: &HilReport, budgets: Option<&(Board, Budgets)>) {
         println!("{}", b.summary());
     }
     println!(
-        "hil: {} waypoints, probe error mean {mean:.2} mm, max {:.2} mm (tolerance {} mm); lag {:.1} ms; \
+        "hil: {} waypoints, probe error mean {mean:.2} mm, max {:.2} mm (tolerance {} mm), across \
+         the gap max {:.2} mm (least clearance to a cartilage {:.1} mm); lag {:.1} ms; \
          {} points compounded; applied poses {}/{}, frames {}/{}; link: {} frames sent, {} re-sent, \
          {} NACKs, {} timeouts, faults injected {:?}; {:.1} s",
         r.waypoints.len(),
         r.max_error(),
         hil::TOLERANCE_MM,
+        r.max_across_gap(),
+        r.least_clearance(),
         r.lag_ms,
         r.points,
         r.applied[0],

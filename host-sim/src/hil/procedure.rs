@@ -45,6 +45,12 @@ pub struct WaypointOutcome {
     pub truth: [f64; 3],
     /// |reached − truth|, mm.
     pub error_mm: f64,
+    /// The component of `reached − truth` across the gap toward a rib (signed, toward the
+    /// lower rib positive; [`crate::phantom::Gap::split`]), mm.
+    pub across_gap_mm: f64,
+    /// How far the aim point stays from the outline of the cartilage it moved toward, mm
+    /// (negative: over it).
+    pub clearance_mm: f64,
 }
 
 /// A whole procedure's result.
@@ -83,6 +89,22 @@ impl HilReport {
             .iter()
             .map(|w| w.error_mm)
             .fold(0.0, f64::max)
+    }
+
+    /// Largest waypoint error across the gap (unsigned), mm.
+    pub fn max_across_gap(&self) -> f64 {
+        self.waypoints
+            .iter()
+            .map(|w| w.across_gap_mm.abs())
+            .fold(0.0, f64::max)
+    }
+
+    /// Least clearance to a cartilage's outline, mm.
+    pub fn least_clearance(&self) -> f64 {
+        self.waypoints
+            .iter()
+            .map(|w| w.clearance_mm)
+            .fold(f64::INFINITY, f64::min)
     }
 }
 
@@ -462,18 +484,19 @@ pub fn run_with<P: Port>(
         .iter()
         .zip(&reached)
         .zip(&pair.true_waypoints)
-        .map(|((m, r), truth)| {
+        .zip(pair.true_gaps())
+        .map(|(((m, r), truth), gap)| {
             let aim = r.map_or([f64::NAN; 3], |t| aim_point(&t));
-            let e = ((aim[0] - truth[0]).powi(2)
-                + (aim[1] - truth[1]).powi(2)
-                + (aim[2] - truth[2]).powi(2))
-            .sqrt();
+            let d = [aim[0] - truth[0], aim[1] - truth[1], aim[2] - truth[2]];
+            let (across_gap_mm, clearance_mm) = gap.split(d);
             WaypointOutcome {
                 mapped: m.position,
                 quality_mm: m.quality_mm,
                 reached: aim,
                 truth: *truth,
-                error_mm: e,
+                error_mm: (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt(),
+                across_gap_mm,
+                clearance_mm,
             }
         })
         .collect();
