@@ -524,6 +524,15 @@ fn markdown(cfg: &EvalConfig, results: &[CaseResult]) -> String {
             let name = m.name();
             let all: Vec<&CaseResult> = rows(results, &name, v).collect();
             let ok: Vec<&CaseResult> = all.iter().copied().filter(|r| r.error.is_none()).collect();
+            if ok.is_empty() {
+                // Every run failed: no figures (a mean of nothing is not 0).
+                let _ = writeln!(
+                    s,
+                    "| {name} | {n}/{n} | — | — | — | — | — | — | — | — |",
+                    n = all.len()
+                );
+                continue;
+            }
             let f = |g: &dyn Fn(&CaseResult) -> f64| {
                 Summary::of(&ok.iter().map(|r| g(r)).collect::<Vec<_>>())
             };
@@ -717,6 +726,9 @@ fn across_the_gap(s: &mut String, cfg: &EvalConfig, results: &[CaseResult]) {
             .map(|&g| {
                 let e = values(&per_waypoint(results, &name, g, |r| &r.waypoint_across_gap));
                 let c = values(&per_waypoint(results, &name, g, |r| &r.waypoint_clearance));
+                if e.is_empty() {
+                    return "— (no run accepted)".into();
+                }
                 let sum = Summary::of(&e);
                 let beyond = e.iter().filter(|&&x| x > HALF_WINDOW_MM).count();
                 format!(
@@ -807,6 +819,55 @@ mod tests {
         for i in 0..WAYPOINT_PLAN.len() {
             assert_eq!(waypoint_class(i), waypoint_class(i + WAYPOINT_PLAN.len()));
         }
+    }
+
+    /// The tables: a method whose every run failed shows no figures (not zeros), and the
+    /// across-the-gap table counts a waypoint beyond half the window and one over a
+    /// cartilage.
+    #[test]
+    fn tables_show_failed_methods_and_the_error_across_the_gap() {
+        let cfg = EvalConfig {
+            pairs: 2,
+            presets: vec![Preset::Standard],
+            hard_without: vec![],
+            variants: vec![Variant::Aligned],
+            methods: vec![
+                EvalMethod::Ours(Method::Improved, true),
+                EvalMethod::Ours(Method::Paper, true),
+            ],
+            jobs: 1,
+        };
+        let case = |m: EvalMethod, seed, error: Option<&str>| CaseResult {
+            method: m.name(),
+            preset: "standard".into(),
+            variant: "aligned".into(),
+            seed,
+            error: error.map(Into::into),
+            waypoint_errors: vec![1.0, 3.0],
+            waypoint_across_gap: vec![0.5, 3.0],
+            waypoint_clearance: vec![9.0, -1.5],
+            ..CaseResult::default()
+        };
+        let results = vec![
+            case(cfg.methods[0], 0, None),
+            case(cfg.methods[0], 1, Some("refused")),
+            case(cfg.methods[1], 0, Some("refused")),
+            case(cfg.methods[1], 1, Some("refused")),
+        ];
+        let md = markdown(&cfg, &results);
+        assert!(
+            md.contains("| ours (paper) | 2/2 | — | — | — | — | — | — | — | — |"),
+            "{md}"
+        );
+        assert!(
+            md.contains("| ours (paper) | — (no run accepted) |"),
+            "{md}"
+        );
+        // 0.5 and 3.0 mm across: mean 1.75, one of two beyond 2.5 mm, one over a cartilage.
+        assert!(
+            md.contains("| ours (improved) | 1.75 ± 1.25 / 3.0, 50.0 %, 1 (-1.5) |"),
+            "{md}"
+        );
     }
 
     /// Each template point's error lands in its structure and its stretch of cartilage:
