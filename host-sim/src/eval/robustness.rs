@@ -260,6 +260,11 @@ struct Counts {
     refused: usize,
     silent: usize,
     worst: f64,
+    /// Runs reported as a success (accepted or silent) with a waypoint's centre over a
+    /// cartilage (negative clearance).
+    on_cartilage: usize,
+    /// The largest waypoint error across the gap of a run reported as a success, mm.
+    worst_across: f64,
 }
 
 impl Counts {
@@ -275,6 +280,21 @@ impl Counts {
             if r.outcome == "accepted" {
                 c.worst = c.worst.max(r.waypoint_max.unwrap_or(0.0));
             }
+            if r.outcome != "refused" {
+                let res = &r.result;
+                c.on_cartilage += usize::from(res.waypoint_clearance.iter().any(|&x| x < 0.0));
+                // A NaN (a waypoint not mapped) is the worst there is.
+                c.worst_across = res
+                    .waypoint_across_gap
+                    .iter()
+                    .fold(c.worst_across, |w, &x| {
+                        if x.is_nan() {
+                            f64::INFINITY
+                        } else {
+                            w.max(x)
+                        }
+                    });
+            }
         }
         c
     }
@@ -285,9 +305,14 @@ impl Counts {
         } else {
             "—".into()
         };
+        let across = if self.accepted + self.silent > 0 {
+            format!("{:.1}", self.worst_across)
+        } else {
+            "—".into()
+        };
         format!(
-            "| {label} | {method} | {} | {} | {} | {} | {worst} |",
-            self.runs, self.accepted, self.refused, self.silent
+            "| {label} | {method} | {} | {} | {} | {} | {worst} | {} | {across} |",
+            self.runs, self.accepted, self.refused, self.silent, self.on_cartilage
         )
     }
 }
@@ -302,9 +327,10 @@ fn counts_table(
 ) {
     let _ = writeln!(
         s,
-        "| {first} | method | runs | accepted | refused | silent failures | worst accepted |"
+        "| {first} | method | runs | accepted | refused | silent failures | worst accepted | \
+         on a cartilage | worst across the gap |"
     );
-    let _ = writeln!(s, "|---|---|---|---|---|---|---|");
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|");
     for (label, rows) in groups {
         for m in methods {
             let c = Counts::of(rows.iter().copied().filter(|r| &r.result.method == m));
@@ -321,7 +347,10 @@ fn markdown(cfg: &EvalConfig, results: &[RobustResult]) -> String {
         "Robustness sweep: phantom pairs {} (seeds 0..{}, {}), each turned and moved \
          {MOVE_MM:.0} mm or cut as the case says. A silent failure is a run reported as a \
          success with a waypoint more than {SILENT_FAILURE_MM:.0} mm off; worst: the largest \
-         waypoint error of an accepted run, mm.\n",
+         waypoint error of an accepted run, mm. Of the runs reported as a success (accepted \
+         or silent): on a cartilage, those with a waypoint whose centre lands over a \
+         cartilage; worst across the gap, the largest error toward a rib (\"Across the \
+         gap\" in the README), mm.\n",
         cfg.pairs,
         cfg.pairs,
         variants.join(" and ")
@@ -443,5 +472,40 @@ mod tests {
         assert_eq!(outcome(&r), ("accepted", Some(9.9)));
         r.error = Some("no".into());
         assert_eq!(outcome(&r).0, "refused");
+    }
+
+    /// A run reported as a success with a waypoint over a cartilage is counted, whatever
+    /// its Euclidean error; a refused run is not, and a NaN across the gap is the worst.
+    #[test]
+    fn runs_on_a_cartilage_are_counted_among_those_reported_as_a_success() {
+        let run = |errors: Vec<f64>, across: Vec<f64>, clearance: Vec<f64>, error: bool| {
+            let result = CaseResult {
+                method: "m".into(),
+                error: error.then(|| "no".into()),
+                waypoint_errors: errors,
+                waypoint_across_gap: across,
+                waypoint_clearance: clearance,
+                ..CaseResult::default()
+            };
+            let (outcome, waypoint_max) = outcome(&result);
+            RobustResult {
+                case: "yaw 0°".into(),
+                complete: true,
+                outcome,
+                waypoint_max,
+                result,
+            }
+        };
+        let rows = [
+            run(vec![3.0], vec![2.0], vec![-0.5], false), // accepted, yet over a cartilage
+            run(vec![12.0], vec![0.4], vec![8.0], false), // silent, along the gap
+            run(vec![0.0], vec![30.0], vec![-20.0], true), // refused: not counted
+        ];
+        let c = Counts::of(rows.iter());
+        assert_eq!((c.accepted, c.silent, c.refused), (1, 1, 1));
+        assert_eq!((c.on_cartilage, c.worst_across), (1, 2.0));
+        assert_eq!(c.row("l", "m"), "| l | m | 3 | 1 | 1 | 1 | 3.0 | 1 | 2.0 |");
+        let nan = [run(vec![1.0], vec![f64::NAN], vec![f64::NAN], false)];
+        assert_eq!(Counts::of(nan.iter()).worst_across, f64::INFINITY);
     }
 }
