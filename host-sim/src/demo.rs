@@ -149,8 +149,23 @@ pub fn run_demo(
     let (wp_mean, wp_sd, wp_max) = paired_errors(&mapped, &pair.true_waypoints);
     let (dense_mean, dense_sd, dense_max) =
         paired_errors(&outcome.registered, &pair.true_positions());
+    // Across the gap: toward a rib, and the clearance left to the cartilage's outline.
+    let (across, clearance): (Vec<f64>, Vec<f64>) = mapped
+        .iter()
+        .zip(&pair.true_waypoints)
+        .zip(pair.true_gaps())
+        .map(|((m, t), g)| {
+            let e = [0, 1, 2].map(|k| f64::from(m[k]) - t[k]);
+            let (across, clearance) = g.split(e);
+            (across.abs(), clearance)
+        })
+        .unzip();
     outcome.report["ground_truth"] = json!({
         "waypoint_error_mm": { "mean": wp_mean, "sd": wp_sd, "max": wp_max },
+        "across_gap_mm": {
+            "max": across.iter().copied().fold(0.0, f64::max),
+            "least_clearance": clearance.iter().copied().fold(f64::INFINITY, f64::min),
+        },
         "dense_error_mm": { "mean": dense_mean, "sd": dense_sd, "max": dense_max },
     });
     outcome.report["timings_ms"]["total"] = json!(total_ms);

@@ -36,11 +36,16 @@ pub fn run(args: &Args, ctx: &Context) -> Result<(), CliError> {
     })?;
     let g = &r["ground_truth"];
     println!(
-        "demo: waypoint error {:.2} ± {:.2} mm (max {:.2}), dense error {:.2} mm, \
+        "demo: waypoint error {:.2} ± {:.2} mm (max {:.2}; across the gap max {:.2}, \
+         least clearance to a cartilage {:.1}), dense error {:.2} mm, \
          ED {:.2} mm, HD {:.2} mm, registration {:.0} ms; outputs in {}",
         g["waypoint_error_mm"]["mean"].as_f64().unwrap_or(f64::NAN),
         g["waypoint_error_mm"]["sd"].as_f64().unwrap_or(f64::NAN),
         g["waypoint_error_mm"]["max"].as_f64().unwrap_or(f64::NAN),
+        g["across_gap_mm"]["max"].as_f64().unwrap_or(f64::NAN),
+        g["across_gap_mm"]["least_clearance"]
+            .as_f64()
+            .unwrap_or(f64::NAN),
         g["dense_error_mm"]["mean"].as_f64().unwrap_or(f64::NAN),
         r["metrics"]["ed_mean_mm"].as_f64().unwrap_or(f64::NAN),
         r["metrics"]["hausdorff_mm"].as_f64().unwrap_or(f64::NAN),
