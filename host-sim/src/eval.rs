@@ -701,8 +701,9 @@ fn figures(cfg: &EvalConfig, results: &[CaseResult], out: &Path) -> Result<(), C
     write_figures(out, &tpl, &tgt, &outcome, &pair.true_waypoints, &mapped)
 }
 
-/// Every method's waypoint error across the gap, one column per (preset, variant) group.
-fn across_the_gap(s: &mut String, cfg: &EvalConfig, results: &[CaseResult]) {
+/// The (preset, variant) groups of `cfg` as table columns: the groups, the header cells
+/// after the first column's, and the rule under the header.
+fn group_columns(cfg: &EvalConfig) -> (Vec<Group>, String, String) {
     let groups = groups(cfg);
     let head = groups
         .iter()
@@ -710,6 +711,12 @@ fn across_the_gap(s: &mut String, cfg: &EvalConfig, results: &[CaseResult]) {
         .collect::<Vec<_>>()
         .join(" | ");
     let rule = "|---".repeat(groups.len() + 1) + "|";
+    (groups, head, rule)
+}
+
+/// Every method's waypoint error across the gap, one column per (preset, variant) group.
+fn across_the_gap(s: &mut String, cfg: &EvalConfig, results: &[CaseResult]) {
+    let (groups, head, rule) = group_columns(cfg);
     let _ = writeln!(
         s,
         "### Waypoint error across the gap\n\nThe component of each waypoint's error toward \
@@ -751,13 +758,7 @@ fn across_the_gap(s: &mut String, cfg: &EvalConfig, results: &[CaseResult]) {
 /// column per (preset, variant) group.
 fn breakdown(s: &mut String, cfg: &EvalConfig, results: &[CaseResult]) {
     let ours = cfg.methods[0].name();
-    let groups = groups(cfg);
-    let head = groups
-        .iter()
-        .map(|g| format!("{}, {}", g.0, g.1))
-        .collect::<Vec<_>>()
-        .join(" | ");
-    let rule = "|---".repeat(groups.len() + 1) + "|";
+    let (groups, head, rule) = group_columns(cfg);
     let _ = writeln!(
         s,
         "### {ours}: waypoint error by position\n\nMean / max (mm) and the share beyond \
