@@ -514,17 +514,17 @@ impl SubjectGeometry {
     /// frame), seen along the patient's anterior axis as the probe sees it: the unit
     /// direction in the chest's plane (z left out) from rib `upper`'s centreline point at
     /// `s` toward rib `upper + 1`'s, and how far the waypoint may move along it either way
-    /// before its centre is over a cartilage (to the cross-sections' outlines at `s`). A
-    /// mapped waypoint's error along that direction is what moves the probe toward a rib.
+    /// before its centre is over a cartilage: to the nearest outline of the cartilage's
+    /// cross-sections within ±0.1 of `s`, as the probe sees them. A mapped waypoint's error
+    /// along that direction is what moves the probe toward a rib.
     pub fn waypoint_gaps(&self) -> Vec<Gap> {
         let waypoints = self.waypoints();
         let mut out = Vec::with_capacity(waypoints.len());
-        for (side, w) in Side::BOTH
+        for ((side, &(upper, s)), w) in Side::BOTH
             .iter()
             .flat_map(|&side| WAYPOINT_PLAN.iter().map(move |p| (side, p)))
             .zip(&waypoints)
         {
-            let (side, &(upper, s)) = side;
             let a = Part::Cartilage { rib: upper, side };
             let b = Part::Cartilage {
                 rib: upper + 1,
