@@ -150,15 +150,10 @@ pub fn run_demo(
     let (dense_mean, dense_sd, dense_max) =
         paired_errors(&outcome.registered, &pair.true_positions());
     // Across the gap: toward a rib, and the clearance left to the cartilage's outline.
-    let (across, clearance): (Vec<f64>, Vec<f64>) = mapped
-        .iter()
-        .zip(&pair.true_waypoints)
-        .zip(pair.true_gaps())
-        .map(|((m, t), g)| {
-            let e = [0, 1, 2].map(|k| f64::from(m[k]) - t[k]);
-            let (across, clearance) = g.split(e);
-            (across.abs(), clearance)
-        })
+    let (across, clearance): (Vec<f64>, Vec<f64>) = pair
+        .across_the_gaps(&to_file(&mapped))
+        .into_iter()
+        .map(|(across, clearance)| (across.abs(), clearance))
         .unzip();
     outcome.report["ground_truth"] = json!({
         "waypoint_error_mm": { "mean": wp_mean, "sd": wp_sd, "max": wp_max },

@@ -239,14 +239,10 @@ fn evaluate(m: EvalMethod, pair: &PhantomPair, variant: Variant, seed: u64) -> C
                 .zip(&pair.true_waypoints)
                 .map(|(a, b)| dist(a, b))
                 .collect();
-            (r.waypoint_across_gap, r.waypoint_clearance) = wps
-                .iter()
-                .zip(&pair.true_waypoints)
-                .zip(pair.true_gaps())
-                .map(|((a, b), g)| {
-                    let (across, clearance) = g.split([a[0] - b[0], a[1] - b[1], a[2] - b[2]]);
-                    (across.abs(), clearance)
-                })
+            (r.waypoint_across_gap, r.waypoint_clearance) = pair
+                .across_the_gaps(&wps)
+                .into_iter()
+                .map(|(across, clearance)| (across.abs(), clearance))
                 .unzip();
             r.runtime_ms = ms;
         }
@@ -452,10 +448,7 @@ fn summary_json(cfg: &EvalConfig, results: &[CaseResult]) -> Value {
             let ok: Vec<&CaseResult> = rows(results, &name, v)
                 .filter(|r| r.error.is_none())
                 .collect();
-            let wp: Vec<f64> = waypoint_errors(results, &name, v)
-                .iter()
-                .map(|w| w.2)
-                .collect();
+            let wp = values(&waypoint_errors(results, &name, v));
             let mut rt: Vec<f64> = ok.iter().map(|r| r.runtime_ms).collect();
             rt.sort_by(f64::total_cmp);
             per.insert(
@@ -542,12 +535,7 @@ fn markdown(cfg: &EvalConfig, results: &[CaseResult]) -> String {
                 f(&|r| r.hd),
                 f(&|r| r.dense.mean),
             );
-            let wp = Summary::of(
-                &waypoint_errors(results, &name, v)
-                    .iter()
-                    .map(|w| w.2)
-                    .collect::<Vec<_>>(),
-            );
+            let wp = Summary::of(&values(&waypoint_errors(results, &name, v)));
             let mut rt: Vec<f64> = ok.iter().map(|r| r.runtime_ms).collect();
             rt.sort_by(f64::total_cmp);
             let p = match t_test(results, &ours, &name, v) {
@@ -602,10 +590,7 @@ fn figures(cfg: &EvalConfig, results: &[CaseResult], out: &Path) -> Result<(), C
             .iter()
             .map(|m| Series {
                 label: m.name(),
-                values: waypoint_errors(results, &m.name(), v)
-                    .iter()
-                    .map(|w| w.2)
-                    .collect(),
+                values: values(&waypoint_errors(results, &m.name(), v)),
             })
             .collect();
         plot::error_distributions(

@@ -654,6 +654,18 @@ impl PhantomPair {
             .collect()
     }
 
+    /// Each mapped waypoint's error against the true one split by its window
+    /// ([`Gap::split`]: the signed component across the gap and the clearance left), in
+    /// the order of `true_waypoints`; `mapped` in the target frame.
+    pub fn across_the_gaps(&self, mapped: &[[f64; 3]]) -> Vec<(f64, f64)> {
+        mapped
+            .iter()
+            .zip(&self.true_waypoints)
+            .zip(self.true_gaps())
+            .map(|((m, t), g)| g.split(sub(*m, *t)))
+            .collect()
+    }
+
     /// [`PhantomPair::true_position`] of every template point (solves the patient's
     /// geometry once).
     pub fn true_positions(&self) -> Vec<[f64; 3]> {
