@@ -565,8 +565,10 @@ fn confidence_json(reg: &Registration) -> Value {
         "residual_mm": c.residual_mm,
         "runner_up_mm": finite(c.runner_up_mm),
         "margin": finite(c.margin()),
+        "support_mm": finite(c.support_mm),
         "max_residual_mm": guided::MAX_POSE_RESIDUAL_MM,
         "min_margin": guided::MIN_POSE_MARGIN,
+        "max_support_mm": guided::MAX_SUPPORT_MM,
     })
 }
 

@@ -149,9 +149,14 @@ fn register_writes_every_output_in_template_order() {
     let pose = &report["pose_hypotheses"];
     let residual = pose["residual_mm"].as_f64().unwrap();
     assert!(residual > 0.0 && residual <= pose["max_residual_mm"].as_f64().unwrap());
-    if let Some(m) = pose["margin"].as_f64() {
-        assert!(m >= pose["min_margin"].as_f64().unwrap(), "{pose}");
-    }
+    // Either the sweep supports the whole template closely, or no distinct pose comes
+    // near (the coverage, in "coverage", is then checked too).
+    let support = pose["support_mm"].as_f64().unwrap();
+    let supported = support > 0.0 && support <= pose["max_support_mm"].as_f64().unwrap();
+    let clear = pose["margin"]
+        .as_f64()
+        .is_none_or(|m| m >= pose["min_margin"].as_f64().unwrap());
+    assert!(supported || clear, "{pose}");
     assert!(pose["hypotheses"].as_u64().unwrap() >= 1);
 }
 

@@ -650,15 +650,24 @@ fn from_controller() -> BoxedStrategy<FromController> {
                     serial_dropped_bytes: i,
                 })
             }),
-        (any::<u8>(), f32s(), f32s(), any::<u8>(), any::<u8>()).prop_map(|(h, r, u, c, w)| {
-            FromController::Registration(RegistrationW {
-                hypotheses: h,
-                residual_mm: r,
-                runner_up_mm: u,
-                min_side_span_percent: c,
-                waypoints: w,
-            })
-        }),
+        (
+            any::<u8>(),
+            f32s(),
+            f32s(),
+            f32s(),
+            any::<u8>(),
+            any::<u8>()
+        )
+            .prop_map(|(h, r, u, s, c, w)| {
+                FromController::Registration(RegistrationW {
+                    hypotheses: h,
+                    residual_mm: r,
+                    runner_up_mm: u,
+                    support_mm: s,
+                    min_side_span_percent: c,
+                    waypoints: w,
+                })
+            }),
     ]
     .boxed()
 }

@@ -663,6 +663,7 @@ fn confidence(reg: &Registration, waypoints: usize) -> RegistrationW {
         hypotheses: c.map_or(0, |c| c.hypotheses),
         residual_mm: c.map_or(f32::NAN, |c| c.residual_mm),
         runner_up_mm: c.map_or(f32::NAN, |c| c.runner_up_mm),
+        support_mm: c.map_or(f32::NAN, |c| c.support_mm),
         // `as` saturates: 0..=255 %.
         min_side_span_percent: (least * 100.0 + 0.5) as u8,
         waypoints: waypoints as u8,

@@ -316,6 +316,7 @@ impl Registering {
                 GuidedStage::Solve(_) => "solve",
                 GuidedStage::Refit(_) => "refit",
                 GuidedStage::Carry(_) => "carry",
+                GuidedStage::Support => "support",
                 GuidedStage::Done => "map",
             },
             Stage::Done(_, fit) if self.spline_next || fit.solving() => "spline",
@@ -483,11 +484,11 @@ impl Registering {
         let coverage = run.coverage().ok_or(Error::RigidFit)?;
         let confidence = run.confidence();
         // A sweep that misses a side or a rib is refused, not mapped from the wrong
-        // cartilage; then a pose that a distinct one fits nearly as well (checked second:
-        // a one-sided sweep is also ambiguous, and "not seen" says what to rescan).
-        check_coverage(&coverage)?;
-        if let Some(c) = confidence {
-            c.check()?;
+        // cartilage, and so is a pose that a distinct one fits nearly as well, unless
+        // the sweep supports the whole template closely.
+        match confidence {
+            Some(c) => c.check(&coverage)?,
+            None => check_coverage(&coverage)?,
         }
         let skeleton = RibSkeleton {
             points,

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 /// Protocol magic, ASCII "RBRG" read as a little-endian `u32`.
 pub const MAGIC: u32 = u32::from_le_bytes(*b"RBRG");
 /// Protocol version; bumped on any change of a message's encoding.
-pub const VERSION: u16 = 2;
+pub const VERSION: u16 = 3;
 
 /// Pixels travel as `u16` in 1/16 pixel: up to 4095.94 px at 0.0625 px resolution.
 pub const PIXEL_SUBDIVISIONS: f32 = 16.0;
@@ -279,7 +279,8 @@ const WAYPOINT_W: usize = 2 * U8 + 4 * F32;
 
 /// How clearly the registration found the patient, sent before its waypoints: the pose
 /// hypotheses' residuals ([`crate::registration::guided::PoseConfidence`]) and the
-/// target's coverage ([`crate::registration::guided::side_shares`]). (Added in version 2.)
+/// target's coverage ([`crate::registration::guided::side_shares`]). (Added in version 2;
+/// `support_mm` in version 3.)
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RegistrationW {
     /// Pose hypotheses refined.
@@ -288,12 +289,15 @@ pub struct RegistrationW {
     pub residual_mm: f32,
     /// Residual of the best hypothesis distinct from it, mm (infinite when none).
     pub runner_up_mm: f32,
+    /// How closely the sweep supports the whole template, mm
+    /// ([`crate::registration::guided::PoseConfidence::support_mm`]).
+    pub support_mm: f32,
     /// The target's smallest rib-side span, percent of the template's (saturating).
     pub min_side_span_percent: u8,
     /// Waypoints mapped (the [`FromController::Waypoint`] messages that follow).
     pub waypoints: u8,
 }
-const REGISTRATION_W: usize = 3 * U8 + 2 * F32;
+const REGISTRATION_W: usize = 3 * U8 + 3 * F32;
 
 /// A probe setpoint: TCP pose in the robot base frame.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

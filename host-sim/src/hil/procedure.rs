@@ -362,11 +362,12 @@ pub fn run_with<P: Port>(
     match confidence {
         Some(c) => progress(&format!(
             "registered: {} waypoints mapped; pose residual {:.2} mm (runner-up {:.2} mm, {} \
-             hypotheses), least rib-side coverage {} %",
+             hypotheses), template support {:.2} mm, least rib-side coverage {} %",
             mapped.len(),
             c.residual_mm,
             c.runner_up_mm,
             c.hypotheses,
+            c.support_mm,
             c.min_side_span_percent
         )),
         None => progress(&format!("registered: {} waypoints mapped", mapped.len())),

@@ -383,6 +383,7 @@ class Registration(Message):
     hypotheses: int  #: Pose hypotheses refined.
     residual_mm: float  #: Residual of the pose taken, mm.
     runner_up_mm: float  #: Residual of the best distinct hypothesis, mm (inf if none).
+    support_mm: float  #: How closely the sweep supports the whole template, mm.
     min_side_span_percent: int  #: Least rib-side span, percent of the template's.
     waypoints: int  #: Waypoints mapped (the :class:`Waypoint` messages that follow).
 
