@@ -97,9 +97,10 @@ pub const MAX_POSE_RESIDUAL_MM: f32 = 10.0;
 /// are not flips but the tail, 10.4–14.1 mm off (README "Out of sample"), and the coverage
 /// and margin checks accept every one of them too. With this bound the
 /// hard complete runs of seeds 0–49 that are refused go from 123 to 42 of 1,300 (phantoms
-/// 7 and 36, whose runner-up pose fits within 17–24 % of the right one, and 37, whose
-/// right rib 2 is short, now map within 6.2, 2.8 and 2.4 mm); no run comes out wrong that
-/// was not already, and every incomplete sweep is still refused.
+/// 7 and 36, whose runner-up pose, a flip, fits within 16–24 % of the right one's
+/// residual, and 37, whose right rib 2 is short, now map within 6.2, 2.8 and 2.4 mm
+/// unturned); no run comes out wrong that was not already, and every incomplete sweep is
+/// still refused.
 pub const MAX_SUPPORT_MM: f32 = 5.0;
 /// Least ratio of the runner-up hypothesis's residual to the winner's
 /// ([`PoseConfidence::check`]). Same sweep: every run that came out right has a ratio of
