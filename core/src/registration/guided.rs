@@ -1398,7 +1398,6 @@ impl TargetSkeleton {
                 if round < last_round {
                     self.stage = GuidedStage::Refit(round);
                 } else {
-                    self.support = 0.0;
                     self.begin(GuidedStage::Support)?;
                 }
             }
