@@ -687,6 +687,39 @@ impl PhantomPair {
             .collect()
     }
 
+    /// How far along each cartilage the sweep reaches: per side ([`Side::index`]) and rib
+    /// (2..=5), the largest material `s` among the target's points on it (0 where it has
+    /// none).
+    pub fn sweep_reach(&self) -> [[f64; RIB_COUNT]; 2] {
+        let mut reach = [[0.0f64; RIB_COUNT]; 2];
+        for m in self.target_material.iter().flatten() {
+            if let Part::Cartilage { rib, side } = m.part {
+                let r = &mut reach[side.index()][rib_index(rib)];
+                *r = r.max(m.s);
+            }
+        }
+        reach
+    }
+
+    /// The true waypoints (indices into `true_waypoints`) that the sweep does not reach:
+    /// a cartilage bounding the waypoint's gap shows no point as far out as the waypoint
+    /// (a sweep hole or a lost lateral tip took it). No registration can support such a
+    /// waypoint, so a sweep with one is not complete coverage.
+    pub fn unreached_waypoints(&self) -> Vec<usize> {
+        let reach = self.sweep_reach();
+        Side::BOTH
+            .iter()
+            .flat_map(|&side| WAYPOINT_PLAN.iter().map(move |&p| (side, p)))
+            .enumerate()
+            .filter(|(_, (side, (upper, s)))| {
+                [*upper, upper + 1]
+                    .iter()
+                    .any(|&rib| reach[side.index()][rib_index(rib)] < *s)
+            })
+            .map(|(i, _)| i)
+            .collect()
+    }
+
     /// Number of outliers in the target.
     pub fn outlier_count(&self) -> usize {
         self.target_material.iter().filter(|m| m.is_none()).count()

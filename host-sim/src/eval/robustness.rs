@@ -11,6 +11,11 @@
 //! - `left side missing`, `right side missing`, `rib 5 missing`: that cartilage's points
 //!   removed (outliers and the sternum kept). These sweeps cannot support every waypoint:
 //!   the product's goal is that they are refused.
+//!
+//! A hard phantom's own sweep holes can do the same to any case: a run whose sweep does
+//! not reach a waypoint ([`PhantomPair::unreached_waypoints`]) is counted apart
+//! ([`Coverage::Holes`]), neither among the complete sweeps, whose refusals are false
+//! alarms, nor among the cut ones.
 
 use super::{evaluate, parallel, phantom, prepare, variant_name, CaseResult, EvalConfig};
 use crate::error::CliError;
@@ -77,7 +82,8 @@ impl Case {
         }
     }
 
-    /// Whether the sweep still covers every waypoint (then a refusal is a false alarm).
+    /// Whether the case leaves the sweep whole (it may still miss a waypoint through the
+    /// phantom's own holes: [`Coverage`]).
     pub fn complete(self) -> bool {
         !matches!(self, Case::SideMissing(_) | Case::Rib5Missing)
     }
@@ -167,13 +173,53 @@ fn random_rotation(rng: &mut Rng) -> ([f64; 3], f64) {
     }
 }
 
+/// How much of the chest a perturbed pair's sweep shows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Coverage {
+    /// Every waypoint's two cartilages reach past it.
+    Complete,
+    /// The case cuts nothing, but the phantom's own sweep holes or a lost lateral tip
+    /// leave a cartilage short of a waypoint (hard phantoms 26, 40, 76, 92 of 0–99): no
+    /// registration can support that waypoint, so it is refused or a silent failure,
+    /// never a false alarm.
+    Holes,
+    /// The case cuts a side or rib 5 away.
+    Cut,
+}
+
+impl Coverage {
+    /// The coverage of `case`'s sweep, which does not reach the waypoints `unreached`.
+    pub fn of(case: Case, unreached: &[usize]) -> Coverage {
+        match (case.complete(), unreached.is_empty()) {
+            (false, _) => Coverage::Cut,
+            (true, true) => Coverage::Complete,
+            (true, false) => Coverage::Holes,
+        }
+    }
+
+    /// Name in tables and the JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            Coverage::Complete => "complete",
+            Coverage::Holes => "holes hide a waypoint",
+            Coverage::Cut => "side or rib 5 cut",
+        }
+    }
+}
+
 /// One method on one perturbed pair.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct RobustResult {
     /// The case's name.
     pub case: String,
-    /// Whether the case keeps complete coverage.
+    /// Whether the sweep covers every waypoint: the case cuts nothing and no sweep hole
+    /// hides one ([`PhantomPair::unreached_waypoints`]). A refusal of such a run is a
+    /// false alarm.
     pub complete: bool,
+    /// [`Coverage::name`] of the run's sweep.
+    pub coverage: &'static str,
+    /// The waypoints the sweep does not reach (indices into the waypoints).
+    pub unreached: Vec<usize>,
     /// `accepted`, `refused` or `silent failure`.
     pub outcome: &'static str,
     /// The largest waypoint error of an accepted run, mm.
@@ -217,12 +263,16 @@ pub fn run_robustness(
         let mut rows = vec![];
         for case in Case::all() {
             let moved = case.apply(&pair, seed);
+            let unreached = moved.unreached_waypoints();
+            let coverage = Coverage::of(case, &unreached);
             for &m in &cfg.methods {
                 let result = evaluate(m, &moved, variant, seed);
                 let (outcome, waypoint_max) = outcome(&result);
                 rows.push(RobustResult {
                     case: case.name(),
-                    complete: case.complete(),
+                    complete: coverage == Coverage::Complete,
+                    coverage: coverage.name(),
+                    unreached: unreached.clone(),
                     outcome,
                     waypoint_max,
                     result,
@@ -350,7 +400,10 @@ fn markdown(cfg: &EvalConfig, results: &[RobustResult]) -> String {
          waypoint error of an accepted run, mm. Of the runs reported as a success (accepted \
          or silent): on a cartilage, those with a waypoint whose centre lands over a \
          cartilage; worst across the gap, the largest error toward a rib (\"Across the \
-         gap\" in the README), mm.\n",
+         gap\" in the README), mm. Coverage: complete, every waypoint's two cartilages \
+         seen past it; holes hide a waypoint, the case cuts nothing but the phantom's own \
+         sweep holes leave a cartilage short of a waypoint (no registration can support \
+         it: a refusal is right); side or rib 5 cut, the cut cases.\n",
         cfg.pairs,
         cfg.pairs,
         variants.join(" and ")
@@ -370,15 +423,15 @@ fn markdown(cfg: &EvalConfig, results: &[RobustResult]) -> String {
             .collect();
         counts_table(&mut s, "case", &methods, by_case);
         let _ = writeln!(s, "\nIn all ({} phantoms):\n", preset.name());
-        let by_coverage = [("complete", true), ("incomplete", false)]
+        let by_coverage = [Coverage::Complete, Coverage::Holes, Coverage::Cut]
             .into_iter()
-            .map(|(label, complete)| {
+            .map(|c| {
                 let rows = mine
                     .iter()
                     .copied()
-                    .filter(|r| r.complete == complete)
+                    .filter(|r| r.coverage == c.name())
                     .collect();
-                (label.to_string(), rows)
+                (c.name().to_string(), rows)
             })
             .collect();
         counts_table(&mut s, "coverage", &methods, by_coverage);
@@ -474,6 +527,42 @@ mod tests {
         assert_eq!(outcome(&r).0, "refused");
     }
 
+    /// A sweep whose holes leave a cartilage short of a waypoint is not complete coverage;
+    /// a cut case never is, and a whole sweep of a standard phantom always is.
+    #[test]
+    fn a_sweep_that_does_not_reach_a_waypoint_is_not_complete() {
+        use crate::phantom::Preset;
+        let hard = |seed| {
+            PhantomPair::generate(&PhantomConfig {
+                seed,
+                preset: Preset::Hard,
+                ..PhantomConfig::default()
+            })
+        };
+        // Hard phantom 40: a sweep hole takes rib 2's right cartilage from s 0.41 on, so
+        // the right side's lateral waypoint of gap 2–3 (index 5 + 1, s 0.7) is not reached.
+        let pair = hard(40);
+        let reach = pair.sweep_reach()[Side::Right.index()][0];
+        assert!((0.3..0.7).contains(&reach), "{reach}");
+        assert_eq!(pair.unreached_waypoints(), vec![6]);
+        for case in [Case::Yaw(90), Case::Rotation(2), Case::Sparse] {
+            let u = case.apply(&pair, 40).unreached_waypoints();
+            assert!(u.contains(&6), "{case:?}: {u:?}");
+            assert_eq!(Coverage::of(case, &u), Coverage::Holes);
+        }
+        // Hard phantom 0 reaches every waypoint: complete.
+        assert_eq!(hard(0).unreached_waypoints(), Vec::<usize>::new());
+        let whole = PhantomPair::generate(&PhantomConfig::default());
+        assert_eq!(whole.unreached_waypoints(), Vec::<usize>::new());
+        assert_eq!(Coverage::of(Case::Yaw(0), &[]), Coverage::Complete);
+        // Cutting the left side leaves every left waypoint (0..5) unreached.
+        let cut = Case::SideMissing(Side::Left).apply(&whole, 0);
+        assert_eq!(cut.unreached_waypoints(), vec![0, 1, 2, 3, 4]);
+        assert_eq!(Coverage::of(Case::Rib5Missing, &[]), Coverage::Cut);
+        let rib5 = Case::Rib5Missing.apply(&whole, 0).unreached_waypoints();
+        assert_eq!(rib5, vec![4, 9]);
+    }
+
     /// A run reported as a success with a waypoint over a cartilage is counted, whatever
     /// its Euclidean error; a refused run is not, and a NaN across the gap is the worst.
     #[test]
@@ -491,6 +580,8 @@ mod tests {
             RobustResult {
                 case: "yaw 0°".into(),
                 complete: true,
+                coverage: Coverage::Complete.name(),
+                unreached: vec![],
                 outcome,
                 waypoint_max,
                 result,
