@@ -66,8 +66,10 @@ impl EvalMethod {
 /// What `eval` runs.
 #[derive(Clone, Debug)]
 pub struct EvalConfig {
-    /// Phantom pairs per variant and preset (seeds `0..pairs`).
+    /// Phantom pairs per variant and preset (seeds `first_seed..first_seed + pairs`).
     pub pairs: u64,
+    /// The first phantom seed: phantoms no constant was set on are a fresh sample.
+    pub first_seed: u64,
     /// Phantom families.
     pub presets: Vec<Preset>,
     /// Difficulties the hard phantoms leave out.
@@ -78,6 +80,19 @@ pub struct EvalConfig {
     pub methods: Vec<EvalMethod>,
     /// Worker threads.
     pub jobs: usize,
+}
+
+impl EvalConfig {
+    /// The phantom seeds of each (preset, variant) group.
+    pub fn seeds(&self) -> std::ops::Range<u64> {
+        self.first_seed..self.first_seed.saturating_add(self.pairs)
+    }
+
+    /// The seeds as tables name them: "0..20".
+    pub fn seed_range(&self) -> String {
+        let r = self.seeds();
+        format!("{}..{}", r.start, r.end)
+    }
 }
 
 /// One method on one phantom pair.
@@ -340,7 +355,7 @@ fn prepare(cfg: &EvalConfig, out: &Path) -> Result<Vec<PairId>, CliError> {
         .flat_map(|&p| {
             cfg.variants
                 .iter()
-                .flat_map(move |&v| (0..cfg.pairs).map(move |s| (p, v, s)))
+                .flat_map(move |&v| cfg.seeds().map(move |s| (p, v, s)))
         })
         .collect())
 }
@@ -385,7 +400,7 @@ pub fn run_eval(
     });
     let table = markdown(cfg, &results);
     io::write_text(&out.join("table.md"), &table)?;
-    let json = json!({ "pairs": cfg.pairs,
+    let json = json!({ "pairs": cfg.pairs, "first_seed": cfg.first_seed,
         "presets": cfg.presets.iter().map(|p| p.name()).collect::<Vec<_>>(),
         "hard_without": cfg.hard_without, "methods": cfg.methods.iter().map(|m| m.name()).collect::<Vec<_>>(),
         "summary": summary_json(cfg, &results), "cases": results });
@@ -493,10 +508,11 @@ fn markdown(cfg: &EvalConfig, results: &[CaseResult]) -> String {
     let ours = cfg.methods[0].name();
     let _ = writeln!(
         s,
-        "Phantom pairs per preset and variant: {} (seeds 0..{}). Errors in mm, mean ± SD over pairs \
+        "Phantom pairs per preset and variant: {} (seeds {}). Errors in mm, mean ± SD over pairs \
          (waypoints: over all waypoints of all pairs); p: paired t-test of the waypoint \
          errors against {ours}.\n",
-        cfg.pairs, cfg.pairs
+        cfg.pairs,
+        cfg.seed_range()
     );
     if cfg.presets.contains(&Preset::Hard) && !cfg.hard_without.is_empty() {
         let names: Vec<&str> = cfg.hard_without.iter().map(|p| p.name()).collect();
@@ -807,6 +823,27 @@ mod tests {
         }
     }
 
+    /// `--first-seed` shifts every group's seeds, and the tables say which they are.
+    #[test]
+    fn the_first_seed_shifts_the_phantoms() {
+        let cfg = EvalConfig {
+            pairs: 3,
+            first_seed: 100,
+            presets: vec![Preset::Standard, Preset::Hard],
+            hard_without: vec![],
+            variants: vec![Variant::Aligned],
+            methods: vec![EvalMethod::Ours(Method::Improved, true)],
+            jobs: 1,
+        };
+        let dir = std::env::temp_dir().join(format!("ribreg-first-seed-{}", std::process::id()));
+        let ids = prepare(&cfg, &dir).unwrap();
+        let _ = std::fs::remove_dir_all(&dir);
+        let seeds: Vec<u64> = ids.iter().map(|id| id.2).collect();
+        assert_eq!(seeds, [100, 101, 102, 100, 101, 102]);
+        assert_eq!(cfg.seed_range(), "100..103");
+        assert!(markdown(&cfg, &[]).contains("(seeds 100..103)"));
+    }
+
     /// The tables: a method whose every run failed shows no figures (not zeros), and the
     /// across-the-gap table counts a waypoint beyond half the window and one over a
     /// cartilage.
@@ -814,6 +851,7 @@ mod tests {
     fn tables_show_failed_methods_and_the_error_across_the_gap() {
         let cfg = EvalConfig {
             pairs: 2,
+            first_seed: 0,
             presets: vec![Preset::Standard],
             hard_without: vec![],
             variants: vec![Variant::Aligned],

@@ -10,9 +10,13 @@ use std::path::PathBuf;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Phantom pairs per variant (seeds 0..N).
+    /// Phantom pairs per variant (seeds S..S+N, S from `--first-seed`).
     #[arg(long, default_value_t = 20)]
     pairs: u64,
+    /// The first phantom seed S: e.g. `--first-seed 100` evaluates phantoms that no
+    /// constant was set on (the README's figures come from seeds 0..100).
+    #[arg(long, default_value_t = 0)]
+    first_seed: u64,
     /// Which pose variants.
     #[arg(long, value_enum, default_value_t = Variants::Both)]
     variants: Variants,
@@ -83,6 +87,7 @@ pub fn run(args: &Args, ctx: &Context) -> Result<(), CliError> {
     };
     let cfg = EvalConfig {
         pairs: args.pairs,
+        first_seed: args.first_seed,
         presets,
         hard_without: args.hard_without.clone(),
         variants,

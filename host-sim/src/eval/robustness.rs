@@ -294,7 +294,7 @@ pub fn run_robustness(
     });
     let table = markdown(cfg, &results);
     io::write_text(&out.join("robustness.md"), &table)?;
-    let json = json!({ "pairs": cfg.pairs, "silent_failure_mm": SILENT_FAILURE_MM,
+    let json = json!({ "pairs": cfg.pairs, "first_seed": cfg.first_seed, "silent_failure_mm": SILENT_FAILURE_MM,
         "move_mm": MOVE_MM, "cases": results });
     let text = serde_json::to_string_pretty(&json)
         .map_err(|e| CliError::Output(format!("robustness results: {e}")))?;
@@ -394,7 +394,7 @@ fn markdown(cfg: &EvalConfig, results: &[RobustResult]) -> String {
     let variants: Vec<&str> = cfg.variants.iter().map(|&v| variant_name(v)).collect();
     let _ = writeln!(
         s,
-        "Robustness sweep: phantom pairs {} (seeds 0..{}, {}), each turned and moved \
+        "Robustness sweep: phantom pairs {} (seeds {}, {}), each turned and moved \
          {MOVE_MM:.0} mm or cut as the case says. A silent failure is a run reported as a \
          success with a waypoint more than {SILENT_FAILURE_MM:.0} mm off; worst: the largest \
          waypoint error of an accepted run, mm. Of the runs reported as a success (accepted \
@@ -405,7 +405,7 @@ fn markdown(cfg: &EvalConfig, results: &[RobustResult]) -> String {
          sweep holes leave a cartilage short of a waypoint (no registration can support \
          it: a refusal is right); side or rib 5 cut, the cut cases.\n",
         cfg.pairs,
-        cfg.pairs,
+        cfg.seed_range(),
         variants.join(" and ")
     );
     let methods: Vec<String> = cfg.methods.iter().map(|m| m.name()).collect();
