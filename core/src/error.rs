@@ -222,6 +222,17 @@ pub enum Error {
         /// Least accepted runner-up residual, percent of the best's.
         min_margin_percent: u8,
     },
+    /// The sweep does not support the mapped template (guided model; see
+    /// [`crate::registration::guided::MAX_CHECKED_SUPPORT_MM`]): its nodes, carried into
+    /// the target, lie this far from the sweep's (RMS). A sweep that missed part of the
+    /// chest, or a registration that carried the template beside it.
+    Unsupported {
+        /// [`crate::registration::guided::PoseConfidence::support_mm`], tenths of a mm
+        /// (saturated; 0 when not measured).
+        support_dmm: u16,
+        /// Largest accepted, tenths of a mm.
+        max_support_dmm: u16,
+    },
 }
 
 impl fmt::Display for Cloud {
@@ -376,6 +387,25 @@ impl fmt::Display for Error {
                     f,
                     "; is the sweep of the rib cartilage? scan more of both sides and register \
                      again"
+                )
+            }
+            Error::Unsupported {
+                support_dmm,
+                max_support_dmm,
+            } => {
+                let mm = |d: u16| f32::from(d) / 10.0;
+                f.write_str("the sweep does not support the mapped template: ")?;
+                // Only an unmeasured support is 0 here (a measured 0 is within any bound).
+                if support_dmm == 0 {
+                    f.write_str("its support was not measured")?;
+                } else {
+                    write!(f, "its nodes lie {:.1} mm from the sweep's", mm(support_dmm))?;
+                }
+                write!(
+                    f,
+                    " (RMS, at most {:.1} mm accepted); did the sweep miss part of the chest? \
+                     scan both sides, ribs 2 to 5, and register again",
+                    mm(max_support_dmm)
                 )
             }
         }

@@ -88,7 +88,10 @@ fn sweeps_missing_a_side_or_a_rib_are_refused() {
             assert!(
                 matches!(
                     e,
-                    Error::NotSeen { .. } | Error::RibPath { .. } | Error::Ambiguous { .. }
+                    Error::NotSeen { .. }
+                        | Error::RibPath { .. }
+                        | Error::Ambiguous { .. }
+                        | Error::Unsupported { .. }
                 ),
                 "seed {seed}, {}: {e}",
                 case.name()
@@ -163,6 +166,7 @@ fn an_up_prior_narrows_the_search_and_a_wrong_one_is_refused() {
                         Error::AgainstPrior { .. }
                             | Error::Ambiguous { .. }
                             | Error::NotSeen { .. }
+                            | Error::Unsupported { .. }
                     ),
                     "seed {seed}, {}: {e}",
                     case.name()
@@ -254,4 +258,41 @@ fn a_closely_supported_template_is_registered_though_a_flip_fits_nearly_as_well(
     for seed in [7, 36, 37] {
         hard_sweep_registered_within_the_line(seed, &[Case::Yaw(0), Case::Rotation(1)]);
     }
+}
+
+/// Coverage is measured through the last guided round's mapping. Measured from the first
+/// round's rigid pose, a patient whose ribs differ from the template's was refused as a
+/// rib not seen though it maps within 6 mm: hard phantom 68 at every pose (rib 4 on the
+/// right at 59 % of the template's span, 76 % in the last round) and 97 turned (rib 2 on
+/// the right at 51 %). This test fails with the first round's coverage.
+#[test]
+fn a_patient_whose_ribs_differ_from_the_template_s_is_not_refused_as_not_seen() {
+    hard_sweep_registered_within_the_line(68, &[Case::Yaw(0), Case::Yaw(90)]);
+    hard_sweep_registered_within_the_line(97, &[Case::Yaw(90)]);
+}
+
+/// A one-sided sweep whose pose comes out wrong spreads the last round's labels onto the
+/// seen side's cartilage: hard phantom 7 without its right side passes the coverage
+/// check there (64 %) and the margin (1.39), 130 mm off. The sweep does not support its
+/// mapped template (7.9 mm RMS): refused, naming the support. It was a silent failure
+/// with the last round's coverage and no `guided::MAX_CHECKED_SUPPORT_MM`.
+#[test]
+fn a_one_sided_sweep_whose_labels_spread_is_refused_as_unsupported() {
+    let p = PhantomPair::generate(&PhantomConfig {
+        seed: 7,
+        preset: Preset::Hard,
+        variant: Variant::Aligned,
+        ..PhantomConfig::default()
+    });
+    let e = run(&Case::SideMissing(Side::Right).apply(&p, 7)).expect_err("one side missing");
+    assert!(
+        matches!(
+            e,
+            Error::Unsupported {
+                support_dmm: 71..,
+                max_support_dmm: 70
+            }
+        ),
+        "{e}"
+    );
 }

@@ -956,11 +956,11 @@ fn corrupted_frames_are_refused() {
 fn error_codes_have_summaries() {
     use ribreg_core::error::Side;
     use ribreg_core::Error;
-    for code in 1..=22 {
+    for code in 1..=23 {
         assert_ne!(wire::error_summary(code), "unknown error", "code {code}");
     }
     assert_eq!(wire::error_summary(0), "unknown error");
-    assert_eq!(wire::error_summary(23), "unknown error");
+    assert_eq!(wire::error_summary(24), "unknown error");
     let not_seen = Error::NotSeen {
         rib: 5,
         side: Side::Right,

@@ -102,6 +102,18 @@ pub const MAX_POSE_RESIDUAL_MM: f32 = 10.0;
 /// unturned); no run comes out wrong that was not already, and every incomplete sweep is
 /// still refused.
 pub const MAX_SUPPORT_MM: f32 = 5.0;
+/// Largest [`PoseConfidence::support_mm`] with which a registration is accepted at all
+/// ([`PoseConfidence::check`]): above [`MAX_SUPPORT_MM`] it must also pass
+/// [`check_coverage`] and [`MIN_POSE_MARGIN`], above this it is refused
+/// ([`Error::Unsupported`]). Measured with the checks switched off as for
+/// [`MAX_SUPPORT_MM`] (seeds 0–99, both presets, 26 cases and two variants each): the
+/// complete runs that came out right end at 6.5 mm or less; the sweeps missing a side
+/// whose last round's coverage passes (hard phantoms 7, 37, 53, 65, 68, 69 and 72 without
+/// a side: 0.58–0.64 of the template's span, waypoints 107–150 mm off) at 7.5–8.9 mm.
+/// Any bound from 6.5 to 7.0 mm gives the same outcome on every run; 7.5 lets hard
+/// phantom 77 through once, 13 mm off, and 8.0 phantom 7 without its right side, 130 mm
+/// off.
+pub const MAX_CHECKED_SUPPORT_MM: f32 = 7.0;
 /// Least ratio of the runner-up hypothesis's residual to the winner's
 /// ([`PoseConfidence::check`]). Same sweep: every run that came out right has a ratio of
 /// at least 1.62 (phantom 12 turned by 180°, whose flipped pose ends at 5.8 mm against
@@ -185,7 +197,12 @@ pub const MIN_RIB_POINTS: usize = 8;
 /// those of the first round's nodes ([`TargetSkeleton::coverage`]); on 30 standard and
 /// 30 hard phantom pairs the complete sweeps show every side at 62 % or more, the 180
 /// sweeps missing a side or rib 5 at most 55 %, and the robustness sweep above refuses
-/// every incomplete sweep and no complete one it did not refuse before.
+/// every incomplete sweep and no complete one it did not refuse before. Since
+/// [`MAX_CHECKED_SUPPORT_MM`] the shares are those of the last round's nodes: `eval
+/// --robustness --preset hard --ours-only --pairs 100`, complete sweeps of seeds 50–99
+/// refused 94 → 72 of 1,244 (phantoms 68 and 97 no longer; 53, 21 times 16–21 mm off,
+/// now refused), silent failures 80 → 58; seeds 0–49 and the standard phantoms
+/// unchanged, every sweep missing a side or rib 5 refused.
 pub const MIN_SIDE_SPAN: f32 = 0.6;
 
 /// Per-node labels of a SOM-1 node set (0 = none, 1 = sternum, 2..=5 ribs).
@@ -995,14 +1012,25 @@ impl PoseConfidence {
     /// [`side_shares`] `coverage`. A template the sweep supports closely everywhere
     /// (`support_mm` within [`MAX_SUPPORT_MM`]) with a pose residual within
     /// [`MAX_POSE_RESIDUAL_MM`] is accepted; any other is checked as a sweep that may
-    /// miss a rib side ([`check_coverage`]) and then as a pose a distinct one fits nearly
-    /// as well ([`PoseConfidence::check_pose`]). The coverage goes first: a one-sided
-    /// sweep is also ambiguous, and "not seen" says what to rescan.
+    /// miss a rib side ([`check_coverage`]), then as a template the sweep does not
+    /// support ([`MAX_CHECKED_SUPPORT_MM`], [`Error::Unsupported`]; an unmeasured
+    /// support too), and then as a pose a distinct one fits nearly as well
+    /// ([`PoseConfidence::check_pose`]). The coverage goes first: a one-sided sweep is
+    /// also unsupported and ambiguous, and "not seen" says what to rescan.
     pub fn check(&self, coverage: &[[f32; 2]; 4]) -> Result<()> {
         if self.residual_mm <= MAX_POSE_RESIDUAL_MM && self.support_mm <= MAX_SUPPORT_MM {
             return Ok(());
         }
         check_coverage(coverage)?;
+        // NaN (not measured) fails the comparison: refused.
+        let supported = self.support_mm <= MAX_CHECKED_SUPPORT_MM;
+        if !supported {
+            let tenths = |mm: f32| (mm * 10.0 + 0.5) as u16;
+            return Err(Error::Unsupported {
+                support_dmm: tenths(self.support_mm),
+                max_support_dmm: tenths(MAX_CHECKED_SUPPORT_MM),
+            });
+        }
         self.check_pose()
     }
 
@@ -1081,7 +1109,7 @@ pub struct TargetSkeleton {
     labels: NodeLabels,
     ribs: Option<RibFits>,
     skeleton: [Vec3; SKELETON_POINTS],
-    /// The first round's [`side_shares`].
+    /// The last round's [`side_shares`].
     coverage: [[f32; 2]; 4],
     /// Sum of the carried template nodes' squared distances to the target's nearest
     /// node so far ([`GuidedStage::Support`]).
@@ -1201,8 +1229,9 @@ impl TargetSkeleton {
         self.sternum.filter(|_| self.stage == GuidedStage::Done)
     }
 
-    /// Per rib, the [`side_shares`] of the nodes labelled in the first round (from the
-    /// rigid pose; no tip search), once done: what [`check_coverage`] checks.
+    /// Per rib, the [`side_shares`] of the nodes labelled in the last round (through
+    /// the previous round's mapping; no tip search), once done: what [`check_coverage`]
+    /// checks.
     pub fn coverage(&self) -> Option<[[f32; 2]; 4]> {
         (self.stage == GuidedStage::Done).then_some(self.coverage)
     }
@@ -1384,13 +1413,16 @@ impl TargetSkeleton {
                 let ribs = self.ribs.take().ok_or(Error::RigidFit)?;
                 let prior = cfg.lengthen_short_ribs.then_some(template_skeleton);
                 (self.skeleton, _) = ribs.finish(Some(template_split), prior, Cloud::Target)?;
-                if round == 0 {
-                    // Coverage is what the nodes labelled from the rigid pose show,
-                    // against the template's own nodes. Later rounds label through the
-                    // skeleton they fitted, tips and all: on a one-sided sweep whose pose
-                    // came out wrong that spread labels onto the seen side's cartilage
-                    // (hard phantom 7 without its right side, 85° off: rib 5's right
-                    // side at 55 % in the first round, 64 % in the last).
+                if round == last_round {
+                    // Coverage is what the nodes labelled through the last round's
+                    // mapping show, against the template's own nodes: the rigid pose of
+                    // the first round labels a patient whose ribs differ from the
+                    // template's short (hard phantom 68's complete sweep: rib 4 on the
+                    // right at 59 % in the first round, 76 % in the last). On a one-sided
+                    // sweep whose pose came out wrong the later rounds spread labels onto
+                    // the seen side's cartilage (hard phantom 7 without its right side,
+                    // 85° off: rib 5's right side at 55 % in the first round, 64 % in
+                    // the last); its support refuses it (MAX_CHECKED_SUPPORT_MM).
                     let own = RibFits::new(&template.som1, template_labels, &Rigid::identity())?;
                     self.coverage = side_shares(&ribs.spans(), &own.spans());
                 }
@@ -1939,7 +1971,7 @@ mod tests {
         );
         let short = [[0.55, 0.9], [0.9; 2], [0.9; 2], [0.9; 2]];
         let full = [[0.9; 2]; 4];
-        for support in [f32::NAN, MAX_SUPPORT_MM + 0.1] {
+        for support in [MAX_SUPPORT_MM + 0.1, MAX_CHECKED_SUPPORT_MM] {
             c.support_mm = support;
             assert!(matches!(
                 c.check(&short),
@@ -1947,6 +1979,36 @@ mod tests {
             ));
             assert!(matches!(c.check(&full), Err(Error::Ambiguous { .. })));
         }
+        // Beyond the checked bound (or unmeasured) a full coverage and a clear margin do
+        // not help; the coverage still speaks first.
+        let clear = [Some((turned(0.0), 4.0)), Some((turned(180.0), 8.0)), None];
+        let (_, mut d) = PoseConfidence::choose(&clear).unwrap();
+        d.support_mm = MAX_CHECKED_SUPPORT_MM;
+        assert_eq!(d.check(&full), Ok(()));
+        for support in [MAX_CHECKED_SUPPORT_MM + 0.1, f32::NAN] {
+            d.support_mm = support;
+            let e = d.check(&full).unwrap_err();
+            assert!(
+                matches!(
+                    e,
+                    Error::Unsupported {
+                        max_support_dmm: 70,
+                        ..
+                    }
+                ),
+                "{e:?}"
+            );
+            assert!(e.to_string().contains("does not support"), "{e}");
+            assert!(matches!(d.check(&short), Err(Error::NotSeen { .. })));
+        }
+        d.support_mm = 7.14;
+        assert_eq!(
+            d.check(&full),
+            Err(Error::Unsupported {
+                support_dmm: 71,
+                max_support_dmm: 70
+            })
+        );
         c.support_mm = MAX_SUPPORT_MM;
         assert_eq!(c.check(&short), Ok(()));
         assert_eq!(c.check(&full), Ok(()));

@@ -428,6 +428,7 @@ pub fn error_summary(code: u8) -> &'static str {
         20 => "a rib side was not seen in the sweep (scan it and register again)",
         21 => "the target's pose is ambiguous (scan more of both sides and register again)",
         22 => "no pose agrees with the configured patient orientation",
+        23 => "the sweep does not support the mapped template (scan both sides and register again)",
         _ => "unknown error",
     }
 }
@@ -471,5 +472,6 @@ pub fn error_code(e: &crate::error::Error) -> u8 {
         E::NotSeen { .. } => 20,
         E::Ambiguous { .. } => 21,
         E::AgainstPrior { .. } => 22,
+        E::Unsupported { .. } => 23,
     }
 }
