@@ -955,6 +955,11 @@ pub fn check_coverage(shares: &[[f32; 2]; 4]) -> Result<()> {
     }
 }
 
+/// A length in mm as whole tenths of a mm, 0..=65,535 (`as` saturates; NaN is 0).
+fn tenths(mm: f32) -> u16 {
+    (mm * 10.0 + 0.5) as u16
+}
+
 /// A share as a whole percent, 0..=255 (`as` saturates; NaN and negative shares are 0).
 fn percent(share: f32) -> u8 {
     (share * 100.0 + 0.5) as u8
@@ -1025,7 +1030,6 @@ impl PoseConfidence {
         // NaN (not measured) fails the comparison: refused.
         let supported = self.support_mm <= MAX_CHECKED_SUPPORT_MM;
         if !supported {
-            let tenths = |mm: f32| (mm * 10.0 + 0.5) as u16;
             return Err(Error::Unsupported {
                 support_dmm: tenths(self.support_mm),
                 max_support_dmm: tenths(MAX_CHECKED_SUPPORT_MM),
@@ -1043,7 +1047,6 @@ impl PoseConfidence {
         if fits && clear {
             return Ok(());
         }
-        let tenths = |mm: f32| (mm * 10.0 + 0.5) as u16;
         Err(Error::Ambiguous {
             residual_dmm: tenths(self.residual_mm),
             runner_up_dmm: tenths(self.runner_up_mm),
