@@ -110,10 +110,13 @@ pub const MAX_SUPPORT_MM: f32 = 5.0;
 /// complete runs that came out right end at 6.5 mm or less; the sweeps missing a side
 /// whose last round's coverage passes (hard phantoms 7, 37, 53, 65, 68, 69 and 72 without
 /// a side: 0.58–0.64 of the template's span, waypoints 107–150 mm off) at 7.5–8.9 mm.
-/// Any bound from 6.5 to 7.0 mm gives the same outcome on every run; 7.5 lets hard
-/// phantom 77 through once, 13 mm off, and 8.0 phantom 7 without its right side, 130 mm
-/// off.
-pub const MAX_CHECKED_SUPPORT_MM: f32 = 7.0;
+/// On those seeds any bound from 6.0 to 7.0 mm gives the same outcome on every run (7.5
+/// lets hard phantom 77 through once, 13 mm off; 8.0 phantom 7 without its right side,
+/// 130 mm off). Seeds 100–199 (`eval --first-seed 100`) showed a flip that close: hard
+/// phantom 153 turned by 180°, whose hypotheses missed the right pose, mapped 146 mm off
+/// with a support of 6.5–6.8 mm, a clear margin (1.45) and the last round's coverage at
+/// 61 %; 7.0 accepted it three times. 6.5, the right runs' own edge, refuses it.
+pub const MAX_CHECKED_SUPPORT_MM: f32 = 6.5;
 /// Least ratio of the runner-up hypothesis's residual to the winner's
 /// ([`PoseConfidence::check`]). Same sweep: every run that came out right has a ratio of
 /// at least 1.62 (phantom 12 turned by 180°, whose flipped pose ends at 5.8 mm against
@@ -1995,7 +1998,7 @@ mod tests {
                 matches!(
                     e,
                     Error::Unsupported {
-                        max_support_dmm: 70,
+                        max_support_dmm: 65,
                         ..
                     }
                 ),
@@ -2004,12 +2007,12 @@ mod tests {
             assert!(e.to_string().contains("does not support"), "{e}");
             assert!(matches!(d.check(&short), Err(Error::NotSeen { .. })));
         }
-        d.support_mm = 7.14;
+        d.support_mm = 6.64;
         assert_eq!(
             d.check(&full),
             Err(Error::Unsupported {
-                support_dmm: 71,
-                max_support_dmm: 70
+                support_dmm: 66,
+                max_support_dmm: 65
             })
         );
         c.support_mm = MAX_SUPPORT_MM;
