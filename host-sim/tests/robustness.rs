@@ -50,6 +50,16 @@ fn pair(seed: u64) -> PhantomPair {
     })
 }
 
+/// Hard phantom `seed`, aligned.
+fn hard(seed: u64) -> PhantomPair {
+    PhantomPair::generate(&PhantomConfig {
+        seed,
+        preset: Preset::Hard,
+        variant: Variant::Aligned,
+        ..PhantomConfig::default()
+    })
+}
+
 #[test]
 fn turned_and_moved_sweeps_are_registered_or_refused_never_wrong() {
     let cases = [Case::Yaw(90), Case::Yaw(180), Case::Rotation(1)];
@@ -185,12 +195,7 @@ fn a_hard_sweep_turned_in_its_plane_comes_out_as_unturned() {
     // Seed 31's turned sweeps ended in a minimum 3.3° from the unturned one's, which ±12°
     // does not reach: 16.5 mm off, accepted (a silent failure), before the ±4° turns.
     for seed in [6, 12, 14, 31] {
-        let p = PhantomPair::generate(&PhantomConfig {
-            seed,
-            preset: Preset::Hard,
-            variant: Variant::Aligned,
-            ..PhantomConfig::default()
-        });
+        let p = hard(seed);
         let unturned = run(&Case::Yaw(0).apply(&p, seed))
             .unwrap_or_else(|e| panic!("seed {seed}, yaw 0°: refused: {e}"));
         for yaw in [45, 90] {
@@ -219,12 +224,7 @@ fn a_patient_far_from_the_template_s_shape_is_registered() {
 /// Hard phantom `seed` (aligned), in each of `cases`, is registered with every waypoint
 /// within `SILENT_FAILURE_MM`.
 fn hard_sweep_registered_within_the_line(seed: u64, cases: &[Case]) {
-    let p = PhantomPair::generate(&PhantomConfig {
-        seed,
-        preset: Preset::Hard,
-        variant: Variant::Aligned,
-        ..PhantomConfig::default()
-    });
+    let p = hard(seed);
     for case in cases {
         let max = run(&case.apply(&p, seed))
             .unwrap_or_else(|e| panic!("seed {seed}, {}: refused: {e}", case.name()));
@@ -278,12 +278,7 @@ fn a_patient_whose_ribs_differ_from_the_template_s_is_not_refused_as_not_seen() 
 /// with the last round's coverage and no `guided::MAX_CHECKED_SUPPORT_MM`.
 #[test]
 fn a_one_sided_sweep_whose_labels_spread_is_refused_as_unsupported() {
-    let p = PhantomPair::generate(&PhantomConfig {
-        seed: 7,
-        preset: Preset::Hard,
-        variant: Variant::Aligned,
-        ..PhantomConfig::default()
-    });
+    let p = hard(7);
     let e = run(&Case::SideMissing(Side::Right).apply(&p, 7)).expect_err("one side missing");
     assert!(
         matches!(
@@ -304,12 +299,7 @@ fn a_one_sided_sweep_whose_labels_spread_is_refused_as_unsupported() {
 /// runs' edge) refuses it; at 7.0 mm it was a silent failure.
 #[test]
 fn a_flip_supported_nearly_as_closely_as_a_right_pose_is_refused() {
-    let p = PhantomPair::generate(&PhantomConfig {
-        seed: 153,
-        preset: Preset::Hard,
-        variant: Variant::Aligned,
-        ..PhantomConfig::default()
-    });
+    let p = hard(153);
     match run(&Case::Yaw(180).apply(&p, 153)) {
         Err(e) => assert!(matches!(e, Error::Unsupported { .. }), "{e}"),
         Ok(max) => panic!("accepted with a waypoint {max:.1} mm off"),
