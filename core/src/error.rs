@@ -233,6 +233,37 @@ pub enum Error {
         /// Largest accepted, tenths of a mm.
         max_support_dmm: u16,
     },
+    /// One side of the target looks cut short by the sweep (guided model; see
+    /// [`crate::registration::guided::check_sides`]): its ribs span much less of the
+    /// template's than the other side's. A registration would squeeze the template's
+    /// ribs onto what is there and pull that side's waypoints toward the sternum.
+    SideShort {
+        /// The short side.
+        side: Side,
+        /// Mean span of its ribs, percent of the template's.
+        percent: u8,
+        /// The same on the other side.
+        other_percent: u8,
+        /// Least accepted ratio of the two, percent.
+        min_ratio_percent: u8,
+    },
+    /// The sweep does not show a waypoint's gap as far out as the waypoint lies (guided
+    /// model; see [`crate::registration::reach`]): a sweep hole or a lost lateral tip
+    /// took a bounding cartilage there, and the waypoint would be placed by the
+    /// template's shape alone.
+    NotReached {
+        /// The waypoint, 0-based (saturated).
+        waypoint: u8,
+        /// The bounding rib, 2..=5.
+        rib: u8,
+        /// The side.
+        side: Side,
+        /// How far beyond that rib's observed end the waypoint lies, tenths of a mm
+        /// (saturated: a rib not seen).
+        beyond_dmm: u16,
+        /// Largest accepted, tenths of a mm.
+        max_beyond_dmm: u16,
+    },
 }
 
 impl fmt::Display for Cloud {
@@ -387,6 +418,43 @@ impl fmt::Display for Error {
                     f,
                     "; is the sweep of the rib cartilage? scan more of both sides and register \
                      again"
+                )
+            }
+            Error::SideShort {
+                side,
+                percent,
+                other_percent,
+                min_ratio_percent,
+            } => write!(
+                f,
+                "the sweep looks cut short on the patient's {side}: its ribs span {percent} % \
+                 of the template's there against {other_percent} % on the other side (at least \
+                 {min_ratio_percent} % of the other side's is needed); scan that side out to the \
+                 ends of the cartilages and register again"
+            ),
+            Error::NotReached {
+                waypoint,
+                rib,
+                side,
+                beyond_dmm,
+                max_beyond_dmm,
+            } => {
+                let mm = |d: u16| f32::from(d) / 10.0;
+                write!(f, "waypoint {} is not reached by the sweep: ", u16::from(waypoint) + 1)?;
+                if beyond_dmm == u16::MAX {
+                    write!(f, "rib {rib} is not seen on the patient's {side}")?;
+                } else {
+                    write!(
+                        f,
+                        "it lies {:.1} mm beyond the end of rib {rib} the sweep shows on the \
+                         patient's {side} (at most {:.1} mm accepted)",
+                        mm(beyond_dmm),
+                        mm(max_beyond_dmm)
+                    )?;
+                }
+                f.write_str(
+                    "; scan that cartilage out to its lateral end and register again, or map \
+                     only the waypoints the sweep reaches (a partial plan)",
                 )
             }
             Error::Unsupported {

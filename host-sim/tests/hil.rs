@@ -167,3 +167,62 @@ fn the_configured_orientation_prior_is_used_and_a_wrong_one_refused() {
         "{text}"
     );
 }
+
+/// A planned waypoint the sweep cannot reach (20 mm beyond the lateral ends of
+/// cartilages 3 and 4 on the left): the controller refuses the plan by default (fault
+/// code 24), and in a partial plan maps it, marks it and every waypoint on its side, and
+/// drives the probe to the others only.
+#[test]
+fn a_waypoint_the_sweep_cannot_reach_refuses_the_plan_or_is_left_out_of_a_partial_one() {
+    use ribreg_sim::phantom::{Part, Side, SubjectGeometry};
+    let phantom = PhantomConfig::default();
+    let pair = ribreg_sim::sweep::simulate(&phantom, &RunOptions::quick().sweep)
+        .unwrap()
+        .pair;
+    let g = SubjectGeometry::new(&pair.template_params);
+    let end = |rib| {
+        g.centerline(
+            Part::Cartilage {
+                rib,
+                side: Side::Left,
+            },
+            1.0,
+        )
+    };
+    let (a, b) = (end(3), end(4));
+    let beyond = [0, 1, 2].map(|k| ((a[k] + b[k]) / 2.0 + if k == 0 { 20.0 } else { 0.0 }) as f32);
+    let options = |partial| RunOptions {
+        extra_waypoints: vec![beyond],
+        partial,
+        ..RunOptions::quick()
+    };
+    let e = hil::run_with(
+        &mut Session::new(InProcess::new()),
+        &phantom,
+        options(false),
+        &mut |_| {},
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("does not reach a waypoint") && e.contains("code 24"),
+        "{e}"
+    );
+    let r = hil::run_with(
+        &mut Session::new(InProcess::new()),
+        &phantom,
+        options(true),
+        &mut |_| {},
+    )
+    .unwrap();
+    let kept: Vec<bool> = r.waypoints.iter().map(|w| w.supported).collect();
+    assert_eq!(
+        kept,
+        [false, false, false, false, false, true, true, true, true, true]
+    );
+    for w in &r.waypoints {
+        // A marked waypoint is never driven to: the robot has no aim point for it.
+        assert_eq!(w.supported, w.error_mm.is_finite(), "{w:?}");
+    }
+    assert!(r.max_error() <= hil::TOLERANCE_MM, "{}", r.max_error());
+}

@@ -51,7 +51,7 @@ SCRIPT = "tests/golden/gen_wire.py"
 OUT = os.path.join("tests", "fixtures", "golden", "wire.json")
 
 MAGIC = int.from_bytes(b"RBRG", "little")  # 0x47524252
-VERSION = 3
+VERSION = 4
 
 # ---------------------------------------------------------------- primitives
 
@@ -124,7 +124,7 @@ def cobs_decode(enc):
 
 # ---------------------------------------------------------------- schemas
 
-U8, U16, U32, U64, I32, F32 = "u8", "u16", "u32", "u64", "i32", "f32"
+U8, U16, U32, U64, I32, F32, BOOL = "u8", "u16", "u32", "u64", "i32", "f32", "bool"
 BITS = {U16: 16, U32: 32, U64: 64}
 
 
@@ -150,7 +150,7 @@ RIGID_W = Array(F32, 12)
 PROBE_W = Struct(("width_px", U16), ("height_px", U16), ("footprint_mm", F32), ("depth_mm", F32))
 CONFIGURE = Struct(("probe", PROBE_W), ("tcp_t_us", RIGID_W), ("ee_t_tcp", RIGID_W), ("lag_us", I32),
                    ("voxel_mm", F32), ("max_speed_mm_s", F32), ("max_accel_mm_s2", F32),
-                   ("standoff_mm", F32), ("target_up", P3))
+                   ("standoff_mm", F32), ("target_up", P3), ("partial", BOOL))
 NODE = Struct(("p", P3), ("label", U8))
 TEMPLATE_SHAPE = Struct(("origin", P3), ("axes", Array(F32, 9)), ("spread", P3),
                         ("skeleton", Array(P3, 30)), ("midline_fraction", Array(F32, 4)))
@@ -177,7 +177,8 @@ NACK_CODE = Enum("NackCode", ("Corrupt", None), ("OutOfOrder", None), ("TooLong"
 FAULT = Enum("Fault", ("PoseTimeout", None), ("Registration", U8))
 STATUS_W = Struct(("state", STATE), ("expected_seq", U16), ("poses", U32), ("frames_placed", U32),
                   ("frames_refused", U32), ("points", U16), ("progress", U8), ("waypoint", U8))
-WAYPOINT_W = Struct(("index", U8), ("total", U8), ("position", P3), ("quality_mm", F32))
+WAYPOINT_W = Struct(("index", U8), ("total", U8), ("position", P3), ("quality_mm", F32),
+                    ("supported", BOOL))
 SETPOINT_W = Struct(("t_us", U64), ("position", P3), ("quat", Array(F32, 4)), ("waypoint", U8))
 COST_W = Struct(("registration_instructions", U64), ("registration_calls", U32),
                 ("worst_call_instructions", U32), ("worst_step_instructions", U32),
@@ -215,6 +216,9 @@ def enc(t, v, seen=None):
     if t == U8:
         assert is_int(v) and 0 <= v <= 0xFF, v
         return bytes([v])
+    if t == BOOL:
+        assert isinstance(v, bool), v
+        return bytes([int(v)])
     if t in BITS:
         assert is_int(v) and 0 <= v < 2 ** BITS[t], (t, v)
         return varint(v)
@@ -265,6 +269,9 @@ def dec(t, b, i):
                 return v, i
     if t == U8:
         return b[i], i + 1
+    if t == BOOL:
+        assert b[i] in (0, 1), b[i]
+        return b[i] == 1, i + 1
     if t in BITS:
         return take_varint(i, BITS[t])
     if t == I32:
@@ -304,7 +311,7 @@ def dec(t, b, i):
 
 def max_size(t):
     """Worst-case postcard size of schema t."""
-    if t == U8:
+    if t in (U8, BOOL):
         return 1
     if t in BITS:
         return len(varint(2 ** BITS[t] - 1))
@@ -420,7 +427,7 @@ def cases():
                        "ee_t_tcp": rot_z(30.0) + [ONE_E_MINUS_7, -0.0, f32(210.75)],
                        "lag_us": -268000, "voxel_mm": f32(2.0), "max_speed_mm_s": f32(20.0),
                        "max_accel_mm_s2": f32(100.0), "standoff_mm": f32(5.0),
-                       "target_up": [f32(0.0), f32(0.25), f32(-1.0)]}})
+                       "target_up": [f32(0.0), f32(0.25), f32(-1.0)], "partial": False}})
     add("configure_extremes", "lag i32::MIN, f32::MAX, smallest normal and subnormal f32", to, 2,
         {"Configure": {"probe": {"width_px": U16_MAX, "height_px": 0, "footprint_mm": F32_MAX,
                                  "depth_mm": F32_MIN_SUBNORMAL},
@@ -428,14 +435,14 @@ def cases():
                        "ee_t_tcp": [-0.0] * 12,
                        "lag_us": -(2**31), "voxel_mm": ONE_E_MINUS_7, "max_speed_mm_s": -ONE_E_MINUS_7,
                        "max_accel_mm_s2": -F32_MIN_SUBNORMAL, "standoff_mm": f32(1e30),
-                       "target_up": [F32_MAX, -0.0, F32_MIN_SUBNORMAL]}})
+                       "target_up": [F32_MAX, -0.0, F32_MIN_SUBNORMAL], "partial": True}})
     add("configure_lag_max", "lag i32::MAX", to, 3,
         {"Configure": {"probe": {"width_px": 640, "height_px": 512, "footprint_mm": f32(50.0),
                                  "depth_mm": f32(80.0)},
                        "tcp_t_us": rot_z(-45.0) + p3(), "ee_t_tcp": rot_z(180.0) + p3(),
                        "lag_us": 2**31 - 1, "voxel_mm": f32(1.5), "max_speed_mm_s": f32(35.5),
                        "max_accel_mm_s2": f32(250.0), "standoff_mm": f32(0.0),
-                       "target_up": [0.0, 0.0, 0.0]}})
+                       "target_up": [0.0, 0.0, 0.0], "partial": False}})
     g = random.Random(11)
     nodes = [{"p": p3(-150.0, 150.0), "label": g.randrange(0, 6)} for _ in range(32)]
     nodes[0]["label"], nodes[1]["label"] = 0, 5
@@ -489,10 +496,11 @@ def cases():
                         "points": [0, 0, 512, 2048, 2048, 2048, U16_MAX][i],
                         "progress": [0, 0, 0, 37, 100, 100, 255][i], "waypoint": [0, 0, 0, 0, 0, 4, 10][i]}})
     add("waypoint", "one mapped waypoint with its quality", fr, 200,
-        {"Waypoint": {"index": 3, "total": 10, "position": p3(), "quality_mm": f32(0.8125)}})
+        {"Waypoint": {"index": 3, "total": 10, "position": p3(), "quality_mm": f32(0.8125),
+                      "supported": True}})
     add("waypoint_quality_tiny", "quality 1e-7 mm, -0.0 in the position", fr, 201,
         {"Waypoint": {"index": 255, "total": 255, "position": [-0.0, 0.0, F32_MIN_SUBNORMAL],
-                      "quality_mm": ONE_E_MINUS_7}})
+                      "quality_mm": ONE_E_MINUS_7, "supported": False}})
     add("setpoint", "a setpoint", fr, 0x2345,
         {"Setpoint": {"t_us": 987_654_321, "position": p3(), "quat": [f32(0.5), f32(-0.5), f32(0.5), f32(-0.5)],
                       "waypoint": 4}})

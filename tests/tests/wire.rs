@@ -475,9 +475,10 @@ fn to_controller() -> BoxedStrategy<ToController> {
         i32s(),
         prop::array::uniform4(f32s()),
         p3(),
+        any::<bool>(),
     )
         .prop_map(
-            |(probe, tcp_t_us, ee_t_tcp, lag_us, [v, s, a, d], target_up)| {
+            |(probe, tcp_t_us, ee_t_tcp, lag_us, [v, s, a, d], target_up, partial)| {
                 ToController::Configure(Configure {
                     probe,
                     tcp_t_us,
@@ -488,6 +489,7 @@ fn to_controller() -> BoxedStrategy<ToController> {
                     max_accel_mm_s2: a,
                     standoff_mm: d,
                     target_up,
+                    partial,
                 })
             },
         );
@@ -595,13 +597,14 @@ fn from_controller() -> BoxedStrategy<FromController> {
                 })
             },
         );
-    let waypoint = (any::<u8>(), any::<u8>(), p3(), f32s()).prop_map(
-        |(index, total, position, quality_mm)| {
+    let waypoint = (any::<u8>(), any::<u8>(), p3(), f32s(), any::<bool>()).prop_map(
+        |(index, total, position, quality_mm, supported)| {
             FromController::Waypoint(WaypointW {
                 index,
                 total,
                 position,
                 quality_mm,
+                supported,
             })
         },
     );
@@ -956,11 +959,11 @@ fn corrupted_frames_are_refused() {
 fn error_codes_have_summaries() {
     use ribreg_core::error::Side;
     use ribreg_core::Error;
-    for code in 1..=23 {
+    for code in 1..=25 {
         assert_ne!(wire::error_summary(code), "unknown error", "code {code}");
     }
     assert_eq!(wire::error_summary(0), "unknown error");
-    assert_eq!(wire::error_summary(24), "unknown error");
+    assert_eq!(wire::error_summary(26), "unknown error");
     let not_seen = Error::NotSeen {
         rib: 5,
         side: Side::Right,
@@ -975,6 +978,22 @@ fn error_codes_have_summaries() {
     };
     assert!(wire::error_summary(wire::error_code(&not_seen)).contains("not seen"));
     assert!(wire::error_summary(wire::error_code(&ambiguous)).contains("ambiguous"));
+    let not_reached = Error::NotReached {
+        waypoint: 3,
+        rib: 3,
+        side: Side::Left,
+        beyond_dmm: 120,
+        max_beyond_dmm: 30,
+    };
+    assert_eq!(wire::error_code(&not_reached), 24);
+    assert!(wire::error_summary(24).contains("does not reach a waypoint"));
+    assert_eq!(
+        not_reached.to_string(),
+        "waypoint 4 is not reached by the sweep: it lies 12.0 mm beyond the end of rib 3 the \
+         sweep shows on the patient's left (+x) (at most 3.0 mm accepted); scan that \
+         cartilage out to its lateral end and register again, or map only the waypoints the \
+         sweep reaches (a partial plan)"
+    );
     let fault = wire::Fault::Registration(wire::error_code(&not_seen));
     assert_eq!(
         fault.to_string(),

@@ -226,6 +226,7 @@ mod link_tests {
             max_accel_mm_s2: 10.0,
             standoff_mm: 10.0,
             target_up: [0.0; 3],
+            partial: false,
         });
         assert!(matches!(
             feed(&mut c, 1, &bad)[..],

@@ -110,6 +110,7 @@ struct Settings {
     max_accel: f32,
     standoff: f32,
     target_up: Option<Vec3>,
+    partial: bool,
 }
 
 /// The controller (see the module docs). `VOXELS` is the compounding cloud's capacity.
@@ -445,14 +446,18 @@ impl<const VOXELS: usize> Controller<VOXELS> {
                 self.require(&[Ready, Done])?;
                 let (_, flange) = self.last_pose.ok_or(NackCode::BadState)?;
                 let s = self.settings.ok_or(NackCode::BadState)?;
-                let first = self.targets.first().ok_or(NackCode::BadState)?.tcp;
+                // The first waypoint the sweep reaches (a partial plan skips the rest).
+                let (first, to) = (self.targets.iter().enumerate())
+                    .find(|(_, t)| t.supported)
+                    .map(|(i, t)| (i, t.tcp))
+                    .ok_or(NackCode::BadState)?;
                 self.segment = Some(Segment {
                     from: flange.after(&s.calibration.ee_t_tcp),
-                    to: first,
+                    to,
                     start_us: now_us,
-                    target: 0,
+                    target: first as u8,
                 });
-                self.waypoint = 0;
+                self.waypoint = first as u8;
                 self.next_setpoint_us = now_us;
                 self.paused_since = None;
                 self.state = Executing;
@@ -486,6 +491,7 @@ impl<const VOXELS: usize> Controller<VOXELS> {
                         total: self.targets.len() as u8,
                         position: t.waypoint.into(),
                         quality_mm: t.quality_mm,
+                        supported: t.supported,
                     }));
                 }
                 Ok(())
@@ -592,11 +598,29 @@ impl<const VOXELS: usize> Controller<VOXELS> {
                     },
                     Some((t, mask)) => {
                         let s = self.settings.as_ref();
-                        let t = target(reg, w, t, mask, cloud, s, self.probe_sum, self.probe_count);
+                        let partial = s.is_some_and(|s| s.partial);
+                        let index = self.targets.len();
+                        let t = target(
+                            reg,
+                            template,
+                            w,
+                            t,
+                            mask,
+                            cloud,
+                            s,
+                            self.probe_sum,
+                            self.probe_count,
+                        )
+                        .and_then(|t| match t.reach {
+                            // A waypoint the sweep does not reach refuses the whole
+                            // plan, unless the plan is partial.
+                            Some(r) if !partial => r.check(index).map(|()| t),
+                            _ => Ok(t),
+                        });
                         // Note: a push cannot fail, waypoints and targets share MAX_WAYPOINTS.
                         match t.map(|t| self.targets.push(t)) {
                             Ok(_) if self.targets.len() < self.waypoints.len() => return,
-                            Ok(_) => Ok(()),
+                            Ok(_) => mark_supported(&mut self.targets),
                             Err(e) => Err(e),
                         }
                     }
@@ -648,6 +672,31 @@ impl<const VOXELS: usize> Controller<VOXELS> {
             error_code(&e),
         )));
     }
+}
+
+/// Marks the targets of a partial plan that are not driven to
+/// ([`crate::registration::reach::WaypointReach::supported`]); a plan that keeps none is
+/// refused with the first unreached waypoint's [`Error::NotReached`]. (Without a partial
+/// plan every target is reached already: an unreached one refused the plan as it was
+/// mapped.)
+fn mark_supported(targets: &mut [ProbeTarget]) -> Result<()> {
+    let mut keep = [true; MAX_WAYPOINTS];
+    for (k, t) in keep.iter_mut().zip(targets.iter()) {
+        let plan = targets.iter().filter_map(|t| t.reach.as_ref());
+        *k = t.reach.is_none_or(|r| r.supported(plan));
+    }
+    for (t, k) in targets.iter_mut().zip(keep) {
+        t.supported = k;
+    }
+    if targets.iter().any(|t| t.supported) {
+        return Ok(());
+    }
+    for (i, t) in targets.iter().enumerate() {
+        if let Some(r) = t.reach {
+            r.check(i)?;
+        }
+    }
+    Ok(())
 }
 
 /// The wire summary of how clearly `reg` found the patient.
@@ -717,6 +766,7 @@ fn settings(c: &Configure) -> Result<Settings> {
         standoff: c.standoff_mm,
         // Zero: no prior (a direction too short to normalise is none, too).
         target_up: up.try_normalize(1e-6),
+        partial: c.partial,
     })
 }
 
@@ -791,6 +841,7 @@ mod fuzz_tests {
                 max_accel_mm_s2: f(rng),
                 standoff_mm: f(rng),
                 target_up: p(rng),
+                partial: rng.below(2) == 1,
             }),
             2 => {
                 let mut nodes = heapless::Vec::new();

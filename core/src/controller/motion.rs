@@ -75,12 +75,14 @@ impl<const VOXELS: usize> Controller<VOXELS> {
             waypoint: seg.target,
         }));
         if elapsed >= move_us.saturating_add(DWELL_US) {
-            let next = usize::from(seg.target) + 1;
-            match self.targets.get(next) {
-                Some(t) => {
+            // The next waypoint the sweep reaches (a partial plan skips the rest).
+            let after = usize::from(seg.target) + 1;
+            let mut rest = self.targets.iter().enumerate().skip(after);
+            match rest.find(|(_, t)| t.supported).map(|(i, t)| (i, t.tcp)) {
+                Some((next, tcp)) => {
                     self.segment = Some(Segment {
                         from: seg.to,
-                        to: t.tcp,
+                        to: tcp,
                         start_us: now_us,
                         target: next as u8,
                     });

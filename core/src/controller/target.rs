@@ -1,12 +1,14 @@
 //! Probe targets: a mapped waypoint becomes a TCP pose on the skin side of the local bone
 //! surface, at the configured standoff, its beam along the surface's inward normal and
 //! its footprint along the gap (the principal axes of the cloud within
-//! [`PATCH_RADIUS_MM`]), with the local rigid fit's RMS residual as its quality.
+//! [`PATCH_RADIUS_MM`]), with the local rigid fit's RMS residual as its quality and
+//! whether the sweep reaches it ([`crate::registration::reach`]).
 
 use super::Settings;
 use crate::error::{Error, Result};
 use crate::math::geom::Rigid;
-use crate::registration::pipeline::Registration;
+use crate::registration::pipeline::{Registration, Template};
+use crate::registration::reach::WaypointReach;
 use crate::Vec3;
 use nalgebra::{Matrix3, SymmetricEigen};
 
@@ -28,6 +30,12 @@ pub struct ProbeTarget {
     /// (how far the skeleton around it is from moving rigidly), mm; the waypoint itself
     /// is mapped by [`Registration::carry`].
     pub quality_mm: f32,
+    /// How far it lies beyond what the sweep shows of its gap ([`WaypointReach`]; `None`
+    /// for a registration without rib extents).
+    pub reach: Option<WaypointReach>,
+    /// Whether the probe is driven there: `false` only in a partial plan, for a waypoint
+    /// [`WaypointReach::supported`] marks.
+    pub supported: bool,
 }
 
 /// Maps one waypoint and turns it into a probe target.
@@ -35,6 +43,7 @@ pub struct ProbeTarget {
 #[allow(clippy::too_many_arguments)]
 pub(super) fn target(
     reg: &Registration,
+    template: &Template,
     w: &Vec3,
     t: Rigid,
     mask: u32,
@@ -56,6 +65,8 @@ pub(super) fn target(
         waypoint: p,
         tcp,
         quality_mm,
+        reach: WaypointReach::of(template, reg, w, &p),
+        supported: true,
     })
 }
 

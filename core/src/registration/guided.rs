@@ -393,6 +393,30 @@ impl RibFits {
         })
     }
 
+    /// Per rib (2..=5), its observed extent in the fitting frame: the lowest x, the
+    /// midline and the highest x of its labelled nodes, taken on to where its tips reach
+    /// ([`Tips`]) — what the cloud shows of the rib, before [`lengthen_short`]. A rib
+    /// without fitted points is empty (its lowest x above its highest).
+    pub fn ends(&self) -> [(f32, f32, f32); 4] {
+        let mut ends = [(f32::INFINITY, f32::NAN, f32::NEG_INFINITY); 4];
+        for (r, end) in ends.iter_mut().enumerate() {
+            let found = self.fits[r].map_or(0, |f| f.count());
+            let (mut x0, mut x1) = self.ext[r];
+            if found == 0 || x0 > x1 {
+                continue;
+            }
+            // The mean spacing in x of the rib's points among all those shown: its
+            // fitted points over its extent, times the points shown per fitted one.
+            let (shown, fitted) = self.shown;
+            let spacing = (x1 - x0) * fitted as f32 / (found as f32 * shown.max(1) as f32);
+            if let Some([lo, hi]) = self.tips.map(|t| t.reach(r, spacing)) {
+                (x0, x1) = (x0.min(lo), x1.max(hi));
+            }
+            *end = (x0, self.midline(x0, x1), x1);
+        }
+        ends
+    }
+
     /// The [`sternum_stations`] of the nodes this was made with, in their own frame.
     pub fn sternum_stations(&self) -> Option<[Vec3; STERNUM_STATIONS]> {
         self.line.stations(&self.to_fit.inverse())
@@ -432,8 +456,6 @@ impl RibFits {
     ) -> Result<([Vec3; SKELETON_POINTS], [f32; 4])> {
         let back = self.to_fit.inverse();
         let mut curves = [None; 4];
-        // Per rib: the observed extent (x0, x1) and the midline.
-        let mut ends = [(0.0f32, 0.0f32, 0.0f32); 4];
         for (r, &rib) in RIBS.iter().enumerate() {
             let found = self.fits[r].map_or(0, |f| f.count());
             let short = Error::RibPath {
@@ -446,16 +468,8 @@ impl RibFits {
                 .filter(|_| found >= MIN_RIB_POINTS)
                 .ok_or(short)?;
             curves[r] = Some(f.solve(3).map_err(|_| short)?);
-            let (mut x0, mut x1) = self.ext[r];
-            // The mean spacing in x of the rib's points among all those shown: its
-            // fitted points over its extent, times the points shown per fitted one.
-            let (shown, fitted) = self.shown;
-            let spacing = (x1 - x0) * fitted as f32 / (found as f32 * shown.max(1) as f32);
-            if let Some([lo, hi]) = self.tips.map(|t| t.reach(r, spacing)) {
-                (x0, x1) = (x0.min(lo), x1.max(hi));
-            }
-            ends[r] = (x0, self.midline(x0, x1), x1);
         }
+        let ends = self.ends();
         let mut fractions = [0.5f32; 4];
         for (fraction, &(x0, mid, x1)) in fractions.iter_mut().zip(&ends) {
             *fraction = (mid - x0) / (x1 - x0);
@@ -958,6 +972,52 @@ pub fn check_coverage(shares: &[[f32; 2]; 4]) -> Result<()> {
     }
 }
 
+/// Least mean [`side_shares`] share of a side, as a fraction of the other side's, unless
+/// the side's own is at least [`SHORT_SIDE_SHARE`] ([`check_sides`]). A patient's two
+/// sides differ little: the hard phantoms' cartilages differ by up to ±12 % per side
+/// and rib (σ 6 %), so the means of four ribs' shares by about 4 % (σ); a sweep that
+/// stops short on one side shortens every rib there. Measured with a throwaway build
+/// recording the last round's shares (`eval --robustness --preset both --ours-only`,
+/// the case "a side stops short", which leaves a side's cartilages beyond 0.6 of their
+/// length out): those runs, accepted before with the lateral waypoints pulled 10–20 mm
+/// toward the sternum (195 of 200 standard runs and 143 of 200 hard ones silent
+/// failures, seeds 0–49), have the short side's mean share at 0.64–0.90 of the other's
+/// (median 0.76) and 0.58–0.83 of the template's; the complete runs accepted at 0.76 or
+/// more of the other's (one hard phantom's sparse sweeps) and 0.76 or more of the
+/// template's. Of the 338 such runs this rule and [`SHORT_SIDE_SHARE`] refuse 315, and of
+/// about 12,000 accepted complete runs (seeds 0–199, both presets) 2 (hard phantom 166,
+/// sparse).
+pub const MIN_SIDE_RATIO: f32 = 0.84;
+/// A side whose mean share of the template's is at least this is never taken for a
+/// sweep that stopped short ([`MIN_SIDE_RATIO`]).
+pub const SHORT_SIDE_SHARE: f32 = 0.8;
+
+/// Refuses a target one side of which looks cut short by the sweep: the mean of its
+/// ribs' [`side_shares`] below [`SHORT_SIDE_SHARE`] and below [`MIN_SIDE_RATIO`] of the
+/// other side's ([`Error::SideShort`]). A registration squeezes the template's ribs
+/// onto what is there, so the waypoints of that side come out pulled toward the
+/// sternum, however closely the sweep supports what it shows. NaN shares (a rib side
+/// not seen) are left to [`check_coverage`].
+pub fn check_sides(shares: &[[f32; 2]; 4]) -> Result<()> {
+    let mean = |side: usize| shares.iter().map(|s| s[side]).sum::<f32>() / 4.0;
+    let (right, left) = (mean(0), mean(1));
+    let (short, other, side) = if right <= left {
+        (right, left, Side::Right)
+    } else {
+        (left, right, Side::Left)
+    };
+    // NaN fails both comparisons: not refused here.
+    if short < SHORT_SIDE_SHARE && short < MIN_SIDE_RATIO * other {
+        return Err(Error::SideShort {
+            side,
+            percent: percent(short),
+            other_percent: percent(other),
+            min_ratio_percent: percent(MIN_SIDE_RATIO),
+        });
+    }
+    Ok(())
+}
+
 /// A length in mm as whole tenths of a mm, 0..=65,535 (`as` saturates; NaN is 0).
 fn tenths(mm: f32) -> u16 {
     (mm * 10.0 + 0.5) as u16
@@ -1117,6 +1177,8 @@ pub struct TargetSkeleton {
     skeleton: [Vec3; SKELETON_POINTS],
     /// The last round's [`side_shares`].
     coverage: [[f32; 2]; 4],
+    /// The last round's [`RibFits::ends`].
+    reach: [(f32, f32, f32); 4],
     /// Sum of the carried template nodes' squared distances to the target's nearest
     /// node so far ([`GuidedStage::Support`]).
     support: f32,
@@ -1171,6 +1233,7 @@ impl TargetSkeleton {
             ribs: None,
             skeleton: [Vec3::zeros(); SKELETON_POINTS],
             coverage: [[f32::NAN; 2]; 4],
+            reach: [(f32::INFINITY, f32::NAN, f32::NEG_INFINITY); 4],
             support: 0.0,
             sternum: None,
             map: None,
@@ -1211,6 +1274,7 @@ impl TargetSkeleton {
         self.carried.clear();
         self.ribs = None;
         self.coverage = [[f32::NAN; 2]; 4];
+        self.reach = [(f32::INFINITY, f32::NAN, f32::NEG_INFINITY); 4];
         self.support = 0.0;
         self.sternum = None;
         self.map = None;
@@ -1240,6 +1304,13 @@ impl TargetSkeleton {
     /// checks.
     pub fn coverage(&self) -> Option<[[f32; 2]; 4]> {
         (self.stage == GuidedStage::Done).then_some(self.coverage)
+    }
+
+    /// Per rib, how far the sweep shows it in the last fitting frame ([`RibFits::ends`]
+    /// of the last round), once done: what [`crate::registration::reach`] checks each
+    /// waypoint against.
+    pub fn reach(&self) -> Option<[(f32, f32, f32); 4]> {
+        (self.stage == GuidedStage::Done).then_some(self.reach)
     }
 
     /// The rigid pose target → template (the last fitting frame) and the 30 target
@@ -1431,6 +1502,7 @@ impl TargetSkeleton {
                     // the last); its support refuses it (MAX_CHECKED_SUPPORT_MM).
                     let own = RibFits::new(&template.som1, template_labels, &Rigid::identity())?;
                     self.coverage = side_shares(&ribs.spans(), &own.spans());
+                    self.reach = ribs.ends();
                 }
                 self.sternum = ribs.sternum_stations();
                 if round < last_round {
@@ -1823,6 +1895,41 @@ mod tests {
         );
         // Rib 3's outermost points sit at even indices or odd alike: ±99 mm and a spacing.
         assert!((skeleton[n].x + 99.5).abs() < 1e-2, "{:?}", skeleton[n]);
+    }
+
+    /// A side short of the other and of the template is refused; short of the other
+    /// alone (a patient with long cartilages on one side) or of the template alone (a
+    /// patient with short ones on both), it is not.
+    #[test]
+    fn a_side_cut_short_is_refused_a_small_patient_is_not() {
+        let shares = |right: f32, left: f32| [[right, left]; 4];
+        assert_eq!(check_sides(&shares(0.95, 1.0)), Ok(()));
+        assert_eq!(check_sides(&shares(0.82, 1.05)), Ok(()));
+        assert_eq!(check_sides(&shares(0.7, 0.75)), Ok(()));
+        assert_eq!(
+            check_sides(&shares(0.95, 0.7)),
+            Err(Error::SideShort {
+                side: Side::Left,
+                percent: 70,
+                other_percent: 95,
+                min_ratio_percent: 84,
+            })
+        );
+        let e = check_sides(&shares(0.66, 0.9)).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                Error::SideShort {
+                    side: Side::Right,
+                    ..
+                }
+            ),
+            "{e:?}"
+        );
+        // One rib side not seen is check_coverage's, not this check's.
+        let mut one = shares(0.9, 0.9);
+        one[3][1] = f32::NAN;
+        assert_eq!(check_sides(&one), Ok(()));
     }
 
     #[test]

@@ -17,6 +17,7 @@ pub mod guided;
 pub mod local_rigid;
 pub mod metrics;
 pub mod pipeline;
+pub mod reach;
 pub mod skeleton;
 
 use crate::limits::{CACHE_CAPACITY, MAX_WORKING_STATE};

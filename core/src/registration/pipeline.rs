@@ -10,7 +10,7 @@ use crate::math::geom::{nearest, validate, validate_count, validate_points, Fram
 use crate::math::spline::{ThinPlate, ThinPlateFit};
 use crate::registration::endpoints::{match_endpoints, EndpointMatch};
 use crate::registration::guided::{
-    check_coverage, fit_ribs, label_nodes, sternum_stations, GuidedStage, NodeLabels,
+    check_coverage, check_sides, fit_ribs, label_nodes, sternum_stations, GuidedStage, NodeLabels,
     PoseConfidence, TargetSkeleton,
 };
 use crate::registration::local_rigid::{LocalRigid, TransformCache};
@@ -185,6 +185,12 @@ pub struct Registration {
     /// `[right, left]` the target's nodes labelled from the rigid pose show, as checked by
     /// [`crate::registration::guided::check_coverage`] (`None` for the graph model).
     pub coverage: Option<[[f32; 2]; 4]>,
+    /// Guided model: per rib (2..=5), how far the sweep shows it — its lowest x,
+    /// midline and highest x in the frame of [`Registration::pose`]
+    /// ([`crate::registration::guided::RibFits::ends`]) — which
+    /// [`crate::registration::reach`] checks the waypoints against (`None` for the graph
+    /// model).
+    pub reach: Option<[(f32, f32, f32); 4]>,
 }
 
 impl Registration {
@@ -485,11 +491,14 @@ impl Registering {
         let confidence = run.confidence();
         // A sweep that misses a side or a rib is refused, not mapped from the wrong
         // cartilage, and so is a pose that a distinct one fits nearly as well, unless
-        // the sweep supports the whole template closely.
+        // the sweep supports the whole template closely; then one that stops short on
+        // one side, however well it fits what it shows (after the others, whose
+        // messages say more where both apply).
         match confidence {
             Some(c) => c.check(&coverage)?,
             None => check_coverage(&coverage)?,
         }
+        check_sides(&coverage)?;
         let skeleton = RibSkeleton {
             points,
             paths: Default::default(),
@@ -500,6 +509,7 @@ impl Registering {
         let mut registration = finish(template, graph, pose, None, skeleton, cfg)?;
         registration.confidence = confidence;
         registration.coverage = Some(coverage);
+        registration.reach = run.reach();
         registration.sternum = sternum;
         self.spline_next = cfg.mapping == Mapping::ThinPlate;
         self.stage = Stage::Done(registration, ThinPlateFit::IDLE);
@@ -594,5 +604,6 @@ fn finish(
         sternum: None,
         confidence: None,
         coverage: None,
+        reach: None,
     })
 }

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 /// Protocol magic, ASCII "RBRG" read as a little-endian `u32`.
 pub const MAGIC: u32 = u32::from_le_bytes(*b"RBRG");
 /// Protocol version; bumped on any change of a message's encoding.
-pub const VERSION: u16 = 3;
+pub const VERSION: u16 = 4;
 
 /// Pixels travel as `u16` in 1/16 pixel: up to 4095.94 px at 0.0625 px resolution.
 pub const PIXEL_SUBDIVISIONS: f32 = 16.0;
@@ -64,8 +64,13 @@ pub struct Configure {
     /// ([`crate::config::Config::target_up`]). All zeros: none, any pose. (Added in
     /// version 2.)
     pub target_up: P3,
+    /// Partial plans: map every waypoint and mark those the sweep does not reach
+    /// ([`WaypointW::supported`]; they are never driven to) instead of refusing the
+    /// registration; a registration that reaches none is still refused. (Added in
+    /// version 4.)
+    pub partial: bool,
 }
-const CONFIGURE: usize = PROBE_W + 24 * F32 + I32 + 4 * F32 + 3 * F32;
+const CONFIGURE: usize = PROBE_W + 24 * F32 + I32 + 4 * F32 + 3 * F32 + U8;
 
 /// One template SOM-1 node and its rib label (0 none, 1 sternum, 2..=5 rib).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -274,8 +279,12 @@ pub struct WaypointW {
     pub position: P3,
     /// Quality: RMS residual of the local rigid fit that mapped it, mm (lower is better).
     pub quality_mm: f32,
+    /// Whether the sweep reaches it ([`crate::registration::reach`]): `false` only in a
+    /// partial plan ([`Configure::partial`]), and the controller does not drive there.
+    /// (Added in version 4.)
+    pub supported: bool,
 }
-const WAYPOINT_W: usize = 2 * U8 + 4 * F32;
+const WAYPOINT_W: usize = 3 * U8 + 4 * F32;
 
 /// How clearly the registration found the patient, sent before its waypoints: the pose
 /// hypotheses' residuals ([`crate::registration::guided::PoseConfidence`]) and the
@@ -429,6 +438,14 @@ pub fn error_summary(code: u8) -> &'static str {
         21 => "the target's pose is ambiguous (scan more of both sides and register again)",
         22 => "no pose agrees with the configured patient orientation",
         23 => "the sweep does not support the mapped template (scan both sides and register again)",
+        24 => {
+            "the sweep does not reach a waypoint (scan its gap out to the lateral ends, or \
+               configure a partial plan)"
+        }
+        25 => {
+            "the sweep looks cut short on one side (scan that side out to the cartilages' \
+               ends and register again)"
+        }
         _ => "unknown error",
     }
 }
@@ -473,5 +490,7 @@ pub fn error_code(e: &crate::error::Error) -> u8 {
         E::Ambiguous { .. } => 21,
         E::AgainstPrior { .. } => 22,
         E::Unsupported { .. } => 23,
+        E::NotReached { .. } => 24,
+        E::SideShort { .. } => 25,
     }
 }

@@ -176,6 +176,7 @@ def run(session: Session, scenario: Scenario, progress: Callable[[str], None]) -
         waypoints.append({
             "mapped": list(w.position),
             "quality_mm": w.quality_mm,
+            "supported": w.supported,
             "reached": list(aim),
             "truth": list(truth),
             "error_mm": math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]),

@@ -37,6 +37,10 @@ pub struct Args {
     /// bytes on the emulator's slow link.
     #[arg(long)]
     quick: bool,
+    /// Configure a partial plan: the controller maps every waypoint, marks those the
+    /// sweep does not reach and never drives there (by default it refuses the plan).
+    #[arg(long)]
+    partial: bool,
     /// The emulated board: `mps2-an386` (QEMU's MPS2, the default) or `f405` (the
     /// STM32F405 under QEMU's netduinoplus2).
     #[arg(long, default_value = "mps2-an386", value_parser = parse_board, conflicts_with_all = ["in_process", "port"])]
@@ -52,10 +56,13 @@ pub struct Args {
 }
 
 pub fn run(args: &Args, ctx: &Context) -> Result<(), CliError> {
-    let options = if args.quick {
-        RunOptions::quick()
-    } else {
-        RunOptions::default()
+    let options = RunOptions {
+        partial: args.partial,
+        ..if args.quick {
+            RunOptions::quick()
+        } else {
+            RunOptions::default()
+        }
     };
     let faults = args.faults.then_some((Faults::DEFAULT, args.fault_seed));
     let phantom = &args.phantom.config();
@@ -155,6 +162,13 @@ fn run_on<P: Port>(
 fn print_report(r: &HilReport, budgets: Option<&(Board, Budgets)>) {
     println!("waypoint  mapped (x, y, z) mm               quality  probe error  across the gap  clearance");
     for (i, w) in r.waypoints.iter().enumerate() {
+        if !w.supported {
+            println!(
+                "{i:>8}  ({:8.2}, {:8.2}, {:8.2})  {:6.2} mm  not driven: not reached by the sweep",
+                w.mapped[0], w.mapped[1], w.mapped[2], w.quality_mm,
+            );
+            continue;
+        }
         println!(
             "{i:>8}  ({:8.2}, {:8.2}, {:8.2})  {:6.2} mm  {:6.2} mm    {:+6.2} mm    {:6.2} mm",
             w.mapped[0],
@@ -166,8 +180,8 @@ fn print_report(r: &HilReport, budgets: Option<&(Board, Budgets)>) {
             w.clearance_mm
         );
     }
-    let mean =
-        r.waypoints.iter().map(|w| w.error_mm).sum::<f64>() / r.waypoints.len().max(1) as f64;
+    let driven = r.driven().count();
+    let mean = r.driven().map(|w| w.error_mm).sum::<f64>() / driven.max(1) as f64;
     let c = &r.cost;
     if c.registration_calls > 0 {
         let board = budgets.map_or(String::new(), |(b, _)| format!(" on {b}"));
@@ -190,7 +204,7 @@ fn print_report(r: &HilReport, budgets: Option<&(Board, Budgets)>) {
         println!("{}", b.summary());
     }
     println!(
-        "hil: {} waypoints, probe error mean {mean:.2} mm, max {:.2} mm (tolerance {} mm), across \
+        "hil: {} waypoints ({driven} driven to), probe error mean {mean:.2} mm, max {:.2} mm (tolerance {} mm), across \
          the gap max {:.2} mm (least clearance to a cartilage {:.1} mm); lag {:.1} ms; \
          {} points compounded; applied poses {}/{}, frames {}/{}; link: {} frames sent, {} re-sent, \
          {} NACKs, {} timeouts, faults injected {:?}; {:.1} s",

@@ -39,6 +39,9 @@ pub struct WaypointOutcome {
     pub mapped: [f32; 3],
     /// Its quality figure, mm.
     pub quality_mm: f32,
+    /// Whether the sweep reaches it (`WaypointW::supported`): `false` only in a partial
+    /// plan, and then the probe is not driven there (its aim point and errors are NaN).
+    pub supported: bool,
     /// The probe's aim point (TCP + standoff along the beam) when the controller moved on.
     pub reached: [f64; 3],
     /// The phantom's true waypoint.
@@ -83,26 +86,27 @@ pub struct HilReport {
 }
 
 impl HilReport {
-    /// Largest waypoint error, mm.
+    /// The waypoints the probe was driven to (every one but those a partial plan marks
+    /// as not reached by the sweep).
+    pub fn driven(&self) -> impl Iterator<Item = &WaypointOutcome> {
+        self.waypoints.iter().filter(|w| w.supported)
+    }
+
+    /// Largest waypoint error of those driven to, mm.
     pub fn max_error(&self) -> f64 {
-        self.waypoints
-            .iter()
-            .map(|w| w.error_mm)
-            .fold(0.0, f64::max)
+        self.driven().map(|w| w.error_mm).fold(0.0, f64::max)
     }
 
     /// Largest waypoint error across the gap (unsigned), mm.
     pub fn max_across_gap(&self) -> f64 {
-        self.waypoints
-            .iter()
+        self.driven()
             .map(|w| w.across_gap_mm.abs())
             .fold(0.0, f64::max)
     }
 
     /// Least clearance to a cartilage's outline, mm.
     pub fn least_clearance(&self) -> f64 {
-        self.waypoints
-            .iter()
+        self.driven()
             .map(|w| w.clearance_mm)
             .fold(f64::INFINITY, f64::min)
     }
@@ -133,6 +137,13 @@ pub struct RunOptions {
     /// The orientation prior the robot PC configures (`Configure::target_up`: the
     /// patient's anterior in the robot base frame); none unless set.
     pub target_up: Option<[f32; 3]>,
+    /// Configure a partial plan (`Configure::partial`): the controller maps every
+    /// waypoint, marks those the sweep does not reach and drives to the others only.
+    pub partial: bool,
+    /// Planned points appended to the phantom's plan (template frame, mm): for tests of
+    /// what the controller does with a waypoint the sweep cannot reach. They have no
+    /// truth: the report leaves them out.
+    pub extra_waypoints: Vec<[f32; 3]>,
     /// While executing, the robot stops reporting poses from this many ms after Execute
     /// for the second number of ms.
     pub pose_gap_ms: Option<(u64, u64)>,
@@ -197,6 +208,8 @@ pub fn prepare(phantom: &PhantomConfig, sweep_cfg: &SweepConfig) -> Result<Prepa
         standoff_mm: STANDOFF_MM,
         // No orientation prior: the controller finds the pose from any robot set-up.
         target_up: [0.0; 3],
+        // A whole plan or none: the controller refuses a waypoint the sweep misses.
+        partial: false,
     })];
     let nodes: Vec<Node> = tpl
         .graph
@@ -232,13 +245,7 @@ pub fn prepare(phantom: &PhantomConfig, sweep_cfg: &SweepConfig) -> Result<Prepa
         .iter()
         .map(|p| p.map(|v| v as f32))
         .collect();
-    for (k, chunk) in wps.chunks(WAYPOINTS_PER_CHUNK).enumerate() {
-        upload.push(ToController::Waypoints {
-            offset: (k * WAYPOINTS_PER_CHUNK) as u8,
-            total: wps.len() as u8,
-            points: chunk.iter().copied().collect(),
-        });
-    }
+    upload.extend(waypoint_chunks(&wps));
     Ok(Prepared {
         lag_s: lag.lag_s,
         upload,
@@ -246,6 +253,18 @@ pub fn prepare(phantom: &PhantomConfig, sweep_cfg: &SweepConfig) -> Result<Prepa
         waypoints: wps.len(),
         logs,
     })
+}
+
+/// The upload of a plan: chunks of [`WAYPOINTS_PER_CHUNK`].
+fn waypoint_chunks(wps: &[[f32; 3]]) -> Vec<ToController> {
+    wps.chunks(WAYPOINTS_PER_CHUNK)
+        .enumerate()
+        .map(|(k, chunk)| ToController::Waypoints {
+            offset: (k * WAYPOINTS_PER_CHUNK) as u8,
+            total: wps.len() as u8,
+            points: chunk.iter().copied().collect(),
+        })
+        .collect()
 }
 
 /// Runs the whole procedure on phantom `phantom` through `session`.
@@ -275,10 +294,26 @@ pub fn run_with<P: Port>(
         lag_s,
         mut upload,
         nodes,
-        waypoints: n_waypoints,
+        waypoints: mut n_waypoints,
     } = prepared;
-    if let (Some(up), Some(ToController::Configure(c))) = (options.target_up, upload.first_mut()) {
-        c.target_up = up;
+    if !options.extra_waypoints.is_empty() {
+        let mut wps: Vec<[f32; 3]> = Vec::new();
+        upload.retain(|m| match m {
+            ToController::Waypoints { points, .. } => {
+                wps.extend(points.iter().copied());
+                false
+            }
+            _ => true,
+        });
+        wps.extend(options.extra_waypoints.iter().copied());
+        n_waypoints = wps.len();
+        upload.extend(waypoint_chunks(&wps));
+    }
+    if let Some(ToController::Configure(c)) = upload.first_mut() {
+        if let Some(up) = options.target_up {
+            c.target_up = up;
+        }
+        c.partial = options.partial;
     }
     let pair = &logs.pair;
     let cal = logs.calibration;
@@ -493,6 +528,7 @@ pub fn run_with<P: Port>(
             WaypointOutcome {
                 mapped: m.position,
                 quality_mm: m.quality_mm,
+                supported: m.supported,
                 reached: aim,
                 truth: *truth,
                 error_mm: (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt(),

@@ -175,6 +175,9 @@ class Configure(Message):
     #: The patient's anterior as a direction in the robot base frame, roughly: the
     #: registration's orientation prior (3 numbers; all zeros: none, any pose).
     target_up: List[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    #: A partial plan: map every waypoint and mark those the sweep does not reach
+    #: (:attr:`Waypoint.supported`), never driving there, instead of refusing the plan.
+    partial: bool = False
 
     @classmethod
     def _from_body(cls, body: Any) -> "Configure":
@@ -319,6 +322,9 @@ class Waypoint(Message):
     total: int  #: Waypoints in the plan.
     position: Vec3  #: Mapped position, robot base frame, mm.
     quality_mm: float  #: RMS residual of the local rigid fit that mapped it, mm.
+    #: Whether the sweep reaches it: ``False`` only in a partial plan, and the controller
+    #: never drives there.
+    supported: bool = True
 
 
 @dataclass
