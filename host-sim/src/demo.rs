@@ -87,6 +87,7 @@ pub fn write_ct(pair: &PhantomPair, dir: &Path) -> Result<(), CliError> {
         labels: (0..pair.template_waypoints.len())
             .map(|i| format!("W{}", i + 1))
             .collect(),
+        supported: vec![],
     };
     io::write_waypoints(&dir.join("plan.mrk.json"), &plan)?;
     Ok(())

@@ -32,6 +32,9 @@ pub enum EvalMethod {
     Ours(Method, bool),
     /// Ours (improved) with one step left out (`eval --ablation`).
     Without(Ablation),
+    /// Ours (improved), mapping every waypoint and marking those the sweep does not
+    /// reach instead of refusing (`register --partial`; `eval --partial`).
+    Partial,
     /// A baseline.
     Baseline(baselines::Method),
 }
@@ -58,6 +61,7 @@ impl EvalMethod {
             EvalMethod::Ours(m, true) => format!("ours ({})", m.name()),
             EvalMethod::Ours(m, false) => format!("ours ({}, unlabelled)", m.name()),
             EvalMethod::Without(a) => format!("ours (improved), no {}", a.name()),
+            EvalMethod::Partial => "ours (improved, partial)".into(),
             EvalMethod::Baseline(m) => m.name().to_string(),
         }
     }
@@ -122,6 +126,9 @@ pub struct CaseResult {
     pub dense_along_cartilage: Vec<f64>,
     /// Per-waypoint errors (mm), waypoint order.
     pub waypoint_errors: Vec<f64>,
+    /// Per waypoint, whether the method supports it: `false` only where a partial
+    /// mapping ([`EvalMethod::Partial`]) marked it as not reached by the sweep.
+    pub waypoint_supported: Vec<bool>,
     /// The same errors' component across the gap ([`crate::phantom::Gap::across`], mm, unsigned): what
     /// moves the probe toward a rib.
     pub waypoint_across_gap: Vec<f64>,
@@ -168,7 +175,9 @@ fn variant_name(v: Variant) -> &'static str {
 }
 
 /// A method's output on one pair: mapped template points, mapped waypoints, time (ms).
-type Mapped = (Vec<[f64; 3]>, Vec<[f64; 3]>, f64);
+/// Registered template points, mapped waypoints, whether each is supported (empty: all),
+/// and the wall time (ms).
+type Mapped = (Vec<[f64; 3]>, Vec<[f64; 3]>, Vec<bool>, f64);
 
 /// Runs one method on one pair; `Err` carries the method's own error message.
 fn run_method(m: EvalMethod, pair: &PhantomPair) -> Result<Mapped, String> {
@@ -181,13 +190,20 @@ fn run_method(m: EvalMethod, pair: &PhantomPair) -> Result<Mapped, String> {
             };
             run_ours(pair, how, true)
         }
+        EvalMethod::Partial => {
+            let how = Options {
+                partial: true,
+                ..Method::Improved.into()
+            };
+            run_ours(pair, how, true)
+        }
         EvalMethod::Baseline(b) => {
             let t0 = Instant::now();
             let map = baselines::run(b, &pair.template.points, &pair.target)
                 .map_err(|e| e.to_string())?;
             let dense = map.map_all(&pair.template.points);
             let wps = map.map_all(&pair.template_waypoints);
-            Ok((dense, wps, t0.elapsed().as_secs_f64() * 1e3))
+            Ok((dense, wps, vec![], t0.elapsed().as_secs_f64() * 1e3))
         }
     }
 }
@@ -203,9 +219,11 @@ fn run_ours(pair: &PhantomPair, how: Options, labelled: bool) -> Result<Mapped, 
     let o = register_clouds(&tpl, labels, &tgt, Some(&wps), how, &mut |_| ())
         .map_err(|e| e.to_string())?;
     let ms = t0.elapsed().as_secs_f64() * 1e3;
+    let supported = crate::register::supported(&o.reach);
     Ok((
         to_file(&o.registered),
         to_file(&o.waypoints.unwrap_or_default()),
+        supported,
         ms,
     ))
 }
@@ -223,13 +241,14 @@ fn evaluate(m: EvalMethod, pair: &PhantomPair, variant: Variant, seed: u64) -> C
         dense_by_structure: vec![],
         dense_along_cartilage: vec![],
         waypoint_errors: vec![],
+        waypoint_supported: vec![],
         waypoint_across_gap: vec![],
         waypoint_clearance: vec![],
         runtime_ms: f64::NAN,
     };
     match run_method(m, pair) {
         Err(e) => r.error = Some(e),
-        Ok((dense, wps, ms)) => {
+        Ok((dense, wps, supported, ms)) => {
             let to32 = |p: &[[f64; 3]]| -> Vec<Vec3> {
                 p.iter()
                     .map(|q| Vec3::new(q[0] as f32, q[1] as f32, q[2] as f32))
@@ -259,6 +278,7 @@ fn evaluate(m: EvalMethod, pair: &PhantomPair, variant: Variant, seed: u64) -> C
                 .into_iter()
                 .map(|(across, clearance)| (across.abs(), clearance))
                 .unzip();
+            r.waypoint_supported = supported;
             r.runtime_ms = ms;
         }
     }
@@ -697,7 +717,7 @@ fn figures(cfg: &EvalConfig, results: &[CaseResult], out: &Path) -> Result<(), C
     let mapped: Vec<(String, Vec<[f64; 3]>)> = cfg
         .methods
         .iter()
-        .filter_map(|&m| run_method(m, &pair).ok().map(|(_, w, _)| (m.name(), w)))
+        .filter_map(|&m| run_method(m, &pair).ok().map(|(_, w, ..)| (m.name(), w)))
         .collect();
     write_figures(out, &tpl, &tgt, &outcome, &pair.true_waypoints, &mapped)
 }

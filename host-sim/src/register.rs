@@ -13,6 +13,7 @@ use ribreg_core::error::Cloud as Which;
 use ribreg_core::registration::local_rigid::TransformCache;
 use ribreg_core::registration::metrics::{closest_distances, KdTree, Metrics};
 use ribreg_core::registration::pipeline::{register, Registration, Template};
+use ribreg_core::registration::reach::{self, WaypointReach};
 use ribreg_core::registration::{anterior, guided};
 
 use ribreg_core::limits::MAX_COORD_MM;
@@ -114,6 +115,9 @@ pub struct Options {
     pub som_iterations: Option<(u32, u32)>,
     /// A step left out, for `eval --ablation` (`None` for every real use).
     pub without: Option<Ablation>,
+    /// Map every waypoint and mark those the sweep does not reach
+    /// ([`Mapped::reach`]) instead of refusing the registration (`register --partial`).
+    pub partial: bool,
 }
 
 impl From<Method> for Options {
@@ -185,6 +189,13 @@ pub struct RegisterJob {
     /// the template's anterior are not considered. Default: none, any pose.
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_direction, allow_hyphen_values = true)]
     pub target_up: Option<Vec3>,
+    /// Improved method: map every waypoint and mark those the sweep does not reach (a
+    /// sweep hole or a side scanned short of them) — a `supported` column in the CSV
+    /// output (`false`: never drive there), a description in a `.mrk.json` — instead of
+    /// refusing the registration. Still refused: a registration that reaches no
+    /// waypoint, and every check of the pose and the rib coverage.
+    #[arg(long)]
+    pub partial: bool,
 }
 
 /// `X,Y,Z`: three finite numbers, not all zero.
@@ -267,6 +278,8 @@ pub struct RegisterOutcome {
     pub registered: Vec<Vec3>,
     /// Mapped waypoints, if waypoints were given.
     pub waypoints: Option<Vec<Vec3>>,
+    /// Per mapped waypoint, how far the sweep reaches it ([`Mapped::reach`]).
+    pub reach: Vec<Option<WaypointReach>>,
     /// ED / HD of the registered template against the target.
     pub metrics: Metrics,
     /// The JSON report.
@@ -360,6 +373,11 @@ pub struct Mapped {
     pub registered: Vec<Vec3>,
     /// Mapped waypoints, if waypoints were given.
     pub waypoints: Option<Vec<Vec3>>,
+    /// Per mapped waypoint, how far it lies beyond what the sweep shows of its gap
+    /// ([`WaypointReach`]; empty without waypoints, `None`s for the paper's method).
+    /// Without [`Options::partial`] every one is reached: the registration is refused
+    /// otherwise.
+    pub reach: Vec<Option<WaypointReach>>,
     tpl: Box<Template>,
     reg: Box<Registration>,
     method: Method,
@@ -415,6 +433,21 @@ impl Mapped {
             }
             None => None,
         };
+        let reach: Vec<Option<WaypointReach>> = waypoints
+            .iter()
+            .zip(&mapped_wp)
+            .flat_map(|(planned, mapped)| planned.iter().zip(mapped))
+            .map(|(p, m)| WaypointReach::of(&tpl, &reg, p, m))
+            .collect();
+        // Without `partial` every waypoint must be reached; with it, one at least must
+        // be kept (if none is, the first unreached one's refusal says why).
+        if !how.partial || !supported(&reach).contains(&true) {
+            for (i, r) in reach.iter().enumerate() {
+                if let Some(r) = r {
+                    r.check(i)?;
+                }
+            }
+        }
         let t_map = t2.elapsed();
         let by = match &reg.spline {
             Some(s) => format!("the thin-plate spline of {} skeleton pairs", s.pairs()),
@@ -428,6 +461,7 @@ impl Mapped {
         Ok(Mapped {
             registered,
             waypoints: mapped_wp,
+            reach,
             tpl: Box::new(tpl),
             reg: Box::new(reg),
             method: how.method,
@@ -443,6 +477,7 @@ impl Mapped {
         let Mapped {
             registered,
             waypoints,
+            reach,
             tpl,
             reg,
             method,
@@ -477,6 +512,7 @@ impl Mapped {
             },
             "coverage": coverage_json(&reg),
             "pose_hypotheses": confidence_json(&reg),
+            "waypoint_reach": reach_json(&reach),
             "metrics": {
                 "ed_mean_mm": metrics.ed.mean,
                 "ed_sd_mm": metrics.ed.sd,
@@ -502,6 +538,7 @@ impl Mapped {
         RegisterOutcome {
             registered,
             waypoints,
+            reach,
             metrics,
             report,
             template: tpl,
@@ -536,6 +573,46 @@ fn skeleton_json(tpl: &Template, reg: &Registration) -> Value {
         "target": pts(&reg.skeleton.points),
         "ribs": ribs,
     })
+}
+
+/// Per waypoint, whether a partial plan keeps it ([`WaypointReach::supported`]; `true`
+/// for a registration without rib extents).
+pub fn supported(reach: &[Option<WaypointReach>]) -> Vec<bool> {
+    reach
+        .iter()
+        .map(|r| r.is_none_or(|r| r.supported(reach.iter().flatten())))
+        .collect()
+}
+
+/// Guided model: per waypoint, the bounding rib and side it lies farthest beyond, by how
+/// much, and whether that is within the bound (`reach::MAX_BEYOND_MM`); `null` for the
+/// graph model or without waypoints.
+fn reach_json(reach: &[Option<WaypointReach>]) -> Value {
+    if reach.is_empty() || reach.iter().any(Option::is_none) {
+        return Value::Null;
+    }
+    let rows: Vec<Value> = (reach.iter().flatten())
+        .zip(supported(reach))
+        .map(|(r, supported)| {
+            json!({
+                "ribs": r.ribs,
+                "rib": r.rib,
+                "side": side_name(r.side),
+                // JSON has no infinity: a rib not seen is null.
+                "beyond_mm": r.beyond_mm.is_finite().then_some(r.beyond_mm),
+                "reached": r.reached(),
+                "supported": supported,
+            })
+        })
+        .collect();
+    json!({ "max_beyond_mm": reach::MAX_BEYOND_MM, "waypoints": rows })
+}
+
+fn side_name(side: ribreg_core::error::Side) -> &'static str {
+    match side {
+        ribreg_core::error::Side::Left => "left",
+        ribreg_core::error::Side::Right => "right",
+    }
 }
 
 /// Guided model: each rib side's span as a share of the template's, and the least
@@ -695,8 +772,16 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
     let how = Options {
         method: job.method,
         target_up: job.target_up,
+        partial: job.partial,
         ..job.method.into()
     };
+    if job.method == Method::Paper && job.partial {
+        return Err(CliError::Usage(
+            "--partial needs the improved method (the paper's finds no rib extents to check \
+             the waypoints against)"
+                .into(),
+        ));
+    }
     if job.method == Method::Paper && job.target_up.is_some() {
         return Err(CliError::Usage(
             "--target-up needs the improved method (the paper's has no pose hypotheses)".into(),
@@ -751,9 +836,14 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
         Box::new(move || io::write_ply(&job.out, &out, format)),
     )];
     if let (Some(path), Some(w)) = (&job.out_waypoints, &mapped.waypoints) {
+        let supported = match job.partial {
+            true => supported(&mapped.reach),
+            false => vec![],
+        };
         let waypoints = io::Waypoints {
             points: to_file(w),
             labels: planned.map(|p| p.labels).unwrap_or_default(),
+            supported,
         };
         writes.push((
             path,

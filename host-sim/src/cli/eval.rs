@@ -38,8 +38,14 @@ pub struct Args {
     /// method: what each step brings; rows "ours (improved), no ...").
     #[arg(long)]
     ablation: bool,
+    /// Also ours (improved) mapping every waypoint and marking those the sweep does not
+    /// reach (`register --partial`; rows "ours (improved, partial)"); marked waypoints
+    /// are not judged.
+    #[arg(long)]
+    partial: bool,
     /// The robustness sweep instead of the accuracy table: every pair turned (a yaw grid,
-    /// random rotations) and moved 0.5 m, sparse, or missing a side or rib 5; counts
+    /// random rotations) and moved 0.5 m, sparse, missing a side or rib 5, or stopping
+    /// short on one side; counts
     /// accepted runs, refusals and silent failures (writes robustness.md and .json).
     #[arg(long)]
     robustness: bool,
@@ -76,6 +82,9 @@ pub fn run(args: &Args, ctx: &Context) -> Result<(), CliError> {
     }
     if args.ablation {
         methods.extend(Ablation::ALL.iter().map(|&a| EvalMethod::Without(a)));
+    }
+    if args.partial {
+        methods.push(EvalMethod::Partial);
     }
     let jobs = args
         .jobs

@@ -36,6 +36,10 @@ pub const MOVE_MM: f64 = 500.0;
 pub const ROTATIONS: u64 = 4;
 /// The share of the sweep's points the sparse case keeps.
 pub const SPARSE_FRACTION: f64 = 0.3;
+/// Where a sweep that stops short on one side ([`Case::ShortSide`]) leaves that side's
+/// cartilages, as a share of their length from the sternum: past the medial waypoints
+/// (s = 0.35, and 0.5 in gap 4–5) and short of the lateral ones (s = 0.7).
+pub const SHORT_SIDE_S: f64 = 0.6;
 /// Yaw steps, degrees.
 const YAW_STEP_DEG: u32 = 45;
 
@@ -52,6 +56,12 @@ pub enum Case {
     SideMissing(Side),
     /// Rib 5's cartilages (both sides) not scanned.
     Rib5Missing,
+    /// The sweep stops short on one side: its cartilages beyond [`SHORT_SIDE_S`] of
+    /// their length not scanned.
+    ShortSide(Side),
+    /// The sweep stops short on both sides (a band too narrow): every cartilage beyond
+    /// [`SHORT_SIDE_S`] of its length not scanned.
+    Narrow,
 }
 
 impl Case {
@@ -66,6 +76,9 @@ impl Case {
             Case::SideMissing(Side::Left),
             Case::SideMissing(Side::Right),
             Case::Rib5Missing,
+            Case::ShortSide(Side::Left),
+            Case::ShortSide(Side::Right),
+            Case::Narrow,
         ]);
         v
     }
@@ -79,13 +92,19 @@ impl Case {
             Case::SideMissing(Side::Left) => "left side missing".into(),
             Case::SideMissing(Side::Right) => "right side missing".into(),
             Case::Rib5Missing => "rib 5 missing".into(),
+            Case::ShortSide(Side::Left) => "left side stops short".into(),
+            Case::ShortSide(Side::Right) => "right side stops short".into(),
+            Case::Narrow => "both sides stop short".into(),
         }
     }
 
     /// Whether the case leaves the sweep whole (it may still miss a waypoint through the
     /// phantom's own holes: [`Coverage`]).
     pub fn complete(self) -> bool {
-        !matches!(self, Case::SideMissing(_) | Case::Rib5Missing)
+        !matches!(
+            self,
+            Case::SideMissing(_) | Case::Rib5Missing | Case::ShortSide(_) | Case::Narrow
+        )
     }
 
     /// `pair` perturbed: the target's points (and their materials) filtered and moved,
@@ -98,6 +117,12 @@ impl Case {
                 !matches!(m.part, Part::Cartilage { side, .. } if side == s)
             }
             (Case::Rib5Missing, Some(m)) => !matches!(m.part, Part::Cartilage { rib: 5, .. }),
+            (Case::ShortSide(s), Some(m)) => {
+                !matches!(m.part, Part::Cartilage { side, .. } if side == s && m.s > SHORT_SIDE_S)
+            }
+            (Case::Narrow, Some(m)) => {
+                !matches!(m.part, Part::Cartilage { .. } if m.s > SHORT_SIDE_S)
+            }
             _ => true,
         };
         let (target, target_material): (Vec<_>, Vec<_>) = pair
@@ -138,6 +163,9 @@ impl Case {
             Case::SideMissing(Side::Left) => 2001,
             Case::SideMissing(Side::Right) => 2002,
             Case::Rib5Missing => 2003,
+            Case::ShortSide(Side::Left) => 2004,
+            Case::ShortSide(Side::Right) => 2005,
+            Case::Narrow => 2006,
         }
     }
 }
@@ -185,12 +213,16 @@ pub enum Coverage {
     Holes,
     /// The case cuts a side or rib 5 away.
     Cut,
+    /// The case stops the sweep short on one side or both ([`Case::ShortSide`],
+    /// [`Case::Narrow`]): the lateral waypoints there are not reached, the others are.
+    Short,
 }
 
 impl Coverage {
     /// The coverage of `case`'s sweep, which does not reach the waypoints `unreached`.
     pub fn of(case: Case, unreached: &[usize]) -> Coverage {
         match (case.complete(), unreached.is_empty()) {
+            (false, _) if matches!(case, Case::ShortSide(_) | Case::Narrow) => Coverage::Short,
             (false, _) => Coverage::Cut,
             (true, true) => Coverage::Complete,
             (true, false) => Coverage::Holes,
@@ -203,6 +235,7 @@ impl Coverage {
             Coverage::Complete => "complete",
             Coverage::Holes => "holes hide a waypoint",
             Coverage::Cut => "side or rib 5 cut",
+            Coverage::Short => "stops short",
         }
     }
 }
@@ -220,10 +253,13 @@ pub struct RobustResult {
     pub coverage: &'static str,
     /// The waypoints the sweep does not reach (indices into the waypoints).
     pub unreached: Vec<usize>,
-    /// `accepted`, `refused` or `silent failure`.
+    /// `accepted`, `refused` or `silent failure` (judged on the waypoints the method
+    /// supports: a partial mapping's marked ones are never driven to).
     pub outcome: &'static str,
-    /// The largest waypoint error of an accepted run, mm.
+    /// The largest error of an accepted run's supported waypoints, mm.
     pub waypoint_max: Option<f64>,
+    /// The waypoints the method marked as not reached by the sweep (a partial mapping).
+    pub unsupported: Vec<usize>,
     /// The run itself.
     pub result: CaseResult,
 }
@@ -232,12 +268,19 @@ fn outcome(r: &CaseResult) -> (&'static str, Option<f64>) {
     if r.error.is_some() {
         return ("refused", None);
     }
-    // A NaN error is as silent as a large one (`f64::max` would drop it).
-    let max = r
-        .waypoint_errors
-        .iter()
-        .copied()
-        .fold(0.0, |a: f64, e| if e.is_nan() { e } else { a.max(e) });
+    // A NaN error is as silent as a large one (`f64::max` would drop it); a waypoint
+    // marked unsupported is not driven to.
+    let supported = |i: usize| r.waypoint_supported.get(i).is_none_or(|&s| s);
+    let max = (r.waypoint_errors.iter().enumerate())
+        .filter(|&(i, _)| supported(i))
+        .map(|(_, &e)| e)
+        .fold(0.0, |a: f64, e| {
+            if a.is_nan() || e.is_nan() {
+                f64::NAN
+            } else {
+                a.max(e)
+            }
+        });
     if max.is_nan() || max > SILENT_FAILURE_MM {
         ("silent failure", Some(max))
     } else {
@@ -268,6 +311,10 @@ pub fn run_robustness(
             for &m in &cfg.methods {
                 let result = evaluate(m, &moved, variant, seed);
                 let (outcome, waypoint_max) = outcome(&result);
+                let unsupported = (result.waypoint_supported.iter().enumerate())
+                    .filter(|(_, &s)| !s)
+                    .map(|(i, _)| i)
+                    .collect();
                 rows.push(RobustResult {
                     case: case.name(),
                     complete: coverage == Coverage::Complete,
@@ -275,6 +322,7 @@ pub fn run_robustness(
                     unreached: unreached.clone(),
                     outcome,
                     waypoint_max,
+                    unsupported,
                     result,
                 });
             }
@@ -309,6 +357,8 @@ struct Counts {
     accepted: usize,
     refused: usize,
     silent: usize,
+    /// Runs reported as a success with a waypoint marked unsupported (partial).
+    marked: usize,
     worst: f64,
     /// Runs reported as a success (accepted or silent) with a waypoint's centre over a
     /// cartilage (negative clearance).
@@ -331,6 +381,7 @@ impl Counts {
                 c.worst = c.worst.max(r.waypoint_max.unwrap_or(0.0));
             }
             if r.outcome != "refused" {
+                c.marked += usize::from(!r.unsupported.is_empty());
                 let res = &r.result;
                 c.on_cartilage += usize::from(res.waypoint_clearance.iter().any(|&x| x < 0.0));
                 // A NaN (a waypoint not mapped) is the worst there is.
@@ -361,8 +412,8 @@ impl Counts {
             "—".into()
         };
         format!(
-            "| {label} | {method} | {} | {} | {} | {} | {worst} | {} | {across} |",
-            self.runs, self.accepted, self.refused, self.silent, self.on_cartilage
+            "| {label} | {method} | {} | {} | {} | {} | {} | {worst} | {} | {across} |",
+            self.runs, self.accepted, self.refused, self.silent, self.marked, self.on_cartilage
         )
     }
 }
@@ -377,10 +428,10 @@ fn counts_table(
 ) {
     let _ = writeln!(
         s,
-        "| {first} | method | runs | accepted | refused | silent failures | worst accepted | \
-         on a cartilage | worst across the gap |"
+        "| {first} | method | runs | accepted | refused | silent failures | partial | worst \
+         accepted | on a cartilage | worst across the gap |"
     );
-    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");
     for (label, rows) in groups {
         for m in methods {
             let c = Counts::of(rows.iter().copied().filter(|r| &r.result.method == m));
@@ -403,7 +454,11 @@ fn markdown(cfg: &EvalConfig, results: &[RobustResult]) -> String {
          gap\" in the README), mm. Coverage: complete, every waypoint's two cartilages \
          seen past it; holes hide a waypoint, the case cuts nothing but the phantom's own \
          sweep holes leave a cartilage short of a waypoint (no registration can support \
-         it: a refusal is right); side or rib 5 cut, the cut cases.\n",
+         it: a refusal is right); stops short, the sweep leaves one side's cartilages or \
+         both sides' beyond {SHORT_SIDE_S} of their length out (the lateral waypoints \
+         there are not reached); side or rib 5 cut, the cut cases. Partial: runs reported as a \
+         success with waypoints marked as not reached by the sweep (a partial mapping; \
+         they are never driven to, and the other columns judge the rest).\n",
         cfg.pairs,
         cfg.seed_range(),
         variants.join(" and ")
@@ -423,17 +478,22 @@ fn markdown(cfg: &EvalConfig, results: &[RobustResult]) -> String {
             .collect();
         counts_table(&mut s, "case", &methods, by_case);
         let _ = writeln!(s, "\nIn all ({} phantoms):\n", preset.name());
-        let by_coverage = [Coverage::Complete, Coverage::Holes, Coverage::Cut]
-            .into_iter()
-            .map(|c| {
-                let rows = mine
-                    .iter()
-                    .copied()
-                    .filter(|r| r.coverage == c.name())
-                    .collect();
-                (c.name().to_string(), rows)
-            })
-            .collect();
+        let by_coverage = [
+            Coverage::Complete,
+            Coverage::Holes,
+            Coverage::Short,
+            Coverage::Cut,
+        ]
+        .into_iter()
+        .map(|c| {
+            let rows = mine
+                .iter()
+                .copied()
+                .filter(|r| r.coverage == c.name())
+                .collect();
+            (c.name().to_string(), rows)
+        })
+        .collect();
         counts_table(&mut s, "coverage", &methods, by_coverage);
         let _ = writeln!(s);
     }
@@ -563,6 +623,32 @@ mod tests {
         assert_eq!(rib5, vec![4, 9]);
     }
 
+    /// A waypoint a partial mapping marks is not judged: the robot never goes there.
+    /// One marked waypoint does not hide another's error, and a NaN error anywhere is
+    /// a silent failure (a NaN before a finite error was once dropped by `f64::max`).
+    #[test]
+    fn marked_waypoints_are_not_judged_the_others_are() {
+        let judged = |errors: Vec<f64>, supported: Vec<bool>| {
+            outcome(&CaseResult {
+                waypoint_errors: errors,
+                waypoint_supported: supported,
+                ..CaseResult::default()
+            })
+        };
+        assert_eq!(
+            judged(vec![3.0, 25.0], vec![true, false]),
+            ("accepted", Some(3.0))
+        );
+        assert_eq!(
+            judged(vec![3.0, 25.0], vec![]),
+            ("silent failure", Some(25.0))
+        );
+        let (o, max) = judged(vec![12.0, 25.0], vec![true, false]);
+        assert_eq!((o, max), ("silent failure", Some(12.0)));
+        let (o, _) = judged(vec![f64::NAN, 1.0], vec![true, true]);
+        assert_eq!(o, "silent failure");
+    }
+
     /// A run reported as a success with a waypoint over a cartilage is counted, whatever
     /// its Euclidean error; a refused run is not, and a NaN across the gap is the worst.
     #[test]
@@ -584,6 +670,7 @@ mod tests {
                 unreached: vec![],
                 outcome,
                 waypoint_max,
+                unsupported: vec![],
                 result,
             }
         };
@@ -595,7 +682,10 @@ mod tests {
         let c = Counts::of(rows.iter());
         assert_eq!((c.accepted, c.silent, c.refused), (1, 1, 1));
         assert_eq!((c.on_cartilage, c.worst_across), (1, 2.0));
-        assert_eq!(c.row("l", "m"), "| l | m | 3 | 1 | 1 | 1 | 3.0 | 1 | 2.0 |");
+        assert_eq!(
+            c.row("l", "m"),
+            "| l | m | 3 | 1 | 1 | 1 | 0 | 3.0 | 1 | 2.0 |"
+        );
         let nan = [run(vec![1.0], vec![f64::NAN], vec![f64::NAN], false)];
         assert_eq!(Counts::of(nan.iter()).worst_across, f64::INFINITY);
     }

@@ -212,17 +212,25 @@ fn fcsv_layout(columns: &[String]) -> Option<([usize; 3], Option<usize>)> {
 
 /// A Markups JSON document holding `points` (patient frame) as one `Fiducial` markup in
 /// LPS, mm, ids `1`..`N`, all `defined`, with `label(i)` for point `i`.
-pub(super) fn to_markups_json<'a>(points: &[[f64; 3]], label: impl Fn(usize) -> &'a str) -> String {
+pub(super) fn to_markups_json<'a>(
+    points: &[[f64; 3]],
+    label: impl Fn(usize) -> &'a str,
+    supported: impl Fn(usize) -> Option<bool>,
+) -> String {
     let control_points: Vec<Value> = points
         .iter()
         .enumerate()
         .map(|(i, &p)| {
-            json!({
+            let mut point = json!({
                 "id": (i + 1).to_string(),
                 "label": label(i),
                 "position": Space::Lps.from_patient(p),
                 "positionStatus": "defined",
-            })
+            });
+            if supported(i) == Some(false) {
+                point["description"] = json!(NOT_REACHED);
+            }
+            point
         })
         .collect();
     let document = json!({
@@ -241,6 +249,9 @@ pub(super) fn to_markups_json<'a>(points: &[[f64; 3]], label: impl Fn(usize) -> 
     text.push('\n');
     text
 }
+
+/// The description of a control point the sweep does not reach (`register --partial`).
+pub const NOT_REACHED: &str = "not reached by the sweep: do not drive here";
 
 #[cfg(test)]
 mod tests {
@@ -420,7 +431,7 @@ mod tests {
     fn written_json_reads_back_and_names_lps() {
         let points = [[1.0, 2.0, 3.0], [-4.5, 0.25, 1e-9]];
         let labels = ["a", "b \"q\""];
-        let text = to_markups_json(&points, |i| labels[i]);
+        let text = to_markups_json(&points, |i| labels[i], |i| Some(i == 0));
         let v: Value = serde_json::from_str(&text).unwrap();
         assert_eq!(v["@schema"], SCHEMA);
         let m = &v["markups"][0];
@@ -430,6 +441,9 @@ mod tests {
         assert_eq!(m["controlPoints"][1]["id"], "2");
         assert_eq!(m["controlPoints"][0]["position"], json!([1.0, -3.0, 2.0]));
         assert_eq!(m["controlPoints"][0]["positionStatus"], "defined");
+        // Marked not supported: a description; supported: none.
+        assert!(m["controlPoints"][0].get("description").is_none());
+        assert_eq!(m["controlPoints"][1]["description"], NOT_REACHED);
         let back = parse_markups_json(&text).unwrap();
         assert_eq!(back.points, points);
         assert_eq!(back.labels, labels);

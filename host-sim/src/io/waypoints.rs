@@ -19,6 +19,9 @@ pub struct Waypoints {
     /// One label per point (empty strings when the file has none). A writer also
     /// accepts an empty vector for "no labels".
     pub labels: Vec<String>,
+    /// Written only: one flag per point, whether the sweep reaches it (`register
+    /// --partial`); empty for "not marked" (every file read has it empty).
+    pub supported: Vec<bool>,
 }
 
 /// The waypoint formats, from the file name.
@@ -96,8 +99,10 @@ pub fn read_waypoints(path: &Path) -> Result<Waypoints, IoError> {
 /// - `.csv`: header `x,y,z` (patient frame, shortest round-trip numbers), or
 ///   `x,y,z,label` when any label is non-empty; labels holding commas, quotes or
 ///   surrounding blanks are quoted (RFC 4180), as [`parse_waypoints_csv`] reads them.
+///   With [`Waypoints::supported`], a last column `supported` (`true` / `false`).
 /// - `.mrk.json`: a 3D Slicer Markups JSON file (schema v1.0.3) holding one `Fiducial`
-///   markup in LPS, mm, control points with ids `1`..`N`, all `defined`.
+///   markup in LPS, mm, control points with ids `1`..`N`, all `defined`; one marked not
+///   supported has the description `not reached by the sweep: do not drive here`.
 ///
 /// Reading the file back gives the same points (to rounding of the frame conversion,
 /// which only swaps and negates, so exactly) and labels.
@@ -134,13 +139,22 @@ pub fn write_waypoints(path: &Path, waypoints: &Waypoints) -> Result<(), IoError
             }
             .into());
         }
+        let flags = waypoints.supported.len();
+        if flags != 0 && flags != points.len() {
+            return Err(FormatError::LabelCountMismatch {
+                labels: flags,
+                points: points.len(),
+            }
+            .into());
+        }
         Ok(format)
     })();
     let format = checked.map_err(|e: IoError| e.with_path(path))?;
     let label = |i: usize| waypoints.labels.get(i).map_or("", String::as_str);
+    let supported = |i: usize| waypoints.supported.get(i).copied();
     match format {
         Format::MarkupsJson => {
-            let json = markups::to_markups_json(&waypoints.points, label);
+            let json = markups::to_markups_json(&waypoints.points, label, supported);
             write_atomic(path, |out| out.write_all(json.as_bytes()))
         }
         _ => {
@@ -155,10 +169,17 @@ pub fn write_waypoints(path: &Path, waypoints: &Waypoints) -> Result<(), IoError
                     row.push(',');
                     row.push_str(&field);
                 }
+                if let Some(s) = supported(i) {
+                    row.push_str(if s { ",true" } else { ",false" });
+                }
                 rows.push(row);
             }
+            let mut header = String::from(if with_labels { "x,y,z,label" } else { "x,y,z" });
+            if !waypoints.supported.is_empty() {
+                header.push_str(",supported");
+            }
             write_atomic(path, |out| {
-                writeln!(out, "{}", if with_labels { "x,y,z,label" } else { "x,y,z" })?;
+                writeln!(out, "{header}")?;
                 for row in &rows {
                     writeln!(out, "{row}")?;
                 }
@@ -319,6 +340,7 @@ mod tests {
                 "say \"hi\"".to_owned(),
                 String::new(),
             ],
+            supported: vec![],
         }
     }
 
@@ -352,6 +374,39 @@ mod tests {
         assert!(std::fs::read_to_string(&csv)
             .unwrap()
             .starts_with("x,y,z,label\n0.1,-0,"));
+    }
+
+    /// `register --partial`'s flags: a last `supported` column, which the reader skips
+    /// like any other column; a flag count other than the points' is refused.
+    #[test]
+    fn supported_flags_are_a_last_column() {
+        let dir = tempfile::tempdir().unwrap();
+        let csv = dir.path().join("w.csv");
+        let marked = Waypoints {
+            supported: vec![true, false, true],
+            ..sample()
+        };
+        write_waypoints(&csv, &marked).unwrap();
+        let text = std::fs::read_to_string(&csv).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines[0], "x,y,z,label,supported");
+        assert!(lines[1].ends_with(",\"tip, left\",true"), "{}", lines[1]);
+        assert!(lines[2].ends_with(",false"), "{}", lines[2]);
+        assert_eq!(read_waypoints(&csv).unwrap().points, sample().points);
+        let unlabelled = Waypoints {
+            labels: vec![],
+            ..marked.clone()
+        };
+        write_waypoints(&csv, &unlabelled).unwrap();
+        let text = std::fs::read_to_string(&csv).unwrap();
+        assert!(text.starts_with("x,y,z,supported\n"), "{text}");
+        let short = Waypoints {
+            supported: vec![true],
+            ..sample()
+        };
+        let other = dir.path().join("o.csv");
+        assert!(write_waypoints(&other, &short).is_err());
+        assert!(!other.exists());
     }
 
     #[test]
