@@ -219,7 +219,11 @@ fn run_ours(pair: &PhantomPair, how: Options, labelled: bool) -> Result<Mapped, 
     let o = register_clouds(&tpl, labels, &tgt, Some(&wps), how, &mut |_| ())
         .map_err(|e| e.to_string())?;
     let ms = t0.elapsed().as_secs_f64() * 1e3;
-    let supported = crate::register::supported(&o.reach);
+    // Only a partial mapping marks waypoints; any other judges them all.
+    let supported = match how.partial {
+        true => crate::register::supported(&o.reach),
+        false => vec![],
+    };
     Ok((
         to_file(&o.registered),
         to_file(&o.waypoints.unwrap_or_default()),
