@@ -39,6 +39,16 @@ pub enum Side {
     Right,
 }
 
+impl Side {
+    /// `"left"` or `"right"` (reports; `Display` adds the axis).
+    pub fn name(self) -> &'static str {
+        match self {
+            Side::Left => "left",
+            Side::Right => "right",
+        }
+    }
+}
+
 /// Everything that can go wrong in the core. Every variant names what was found and,
 /// where it applies, what was expected.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -439,15 +439,7 @@ impl Mapped {
             .flat_map(|(planned, mapped)| planned.iter().zip(mapped))
             .map(|(p, m)| WaypointReach::of(&tpl, &reg, p, m))
             .collect();
-        // Without `partial` every waypoint must be reached; with it, one at least must
-        // be kept (if none is, the first unreached one's refusal says why).
-        if !how.partial || !supported(&reach).contains(&true) {
-            for (i, r) in reach.iter().enumerate() {
-                if let Some(r) = r {
-                    r.check(i)?;
-                }
-            }
-        }
+        reach::check_plan(reach.iter().map(Option::as_ref), how.partial)?;
         let t_map = t2.elapsed();
         let by = match &reg.spline {
             Some(s) => format!("the thin-plate spline of {} skeleton pairs", s.pairs()),
@@ -597,7 +589,7 @@ fn reach_json(reach: &[Option<WaypointReach>]) -> Value {
             json!({
                 "ribs": r.ribs,
                 "rib": r.rib,
-                "side": side_name(r.side),
+                "side": r.side.name(),
                 // JSON has no infinity: a rib not seen is null.
                 "beyond_mm": r.beyond_mm.is_finite().then_some(r.beyond_mm),
                 "reached": r.reached(),
@@ -606,13 +598,6 @@ fn reach_json(reach: &[Option<WaypointReach>]) -> Value {
         })
         .collect();
     json!({ "max_beyond_mm": reach::MAX_BEYOND_MM, "waypoints": rows })
-}
-
-fn side_name(side: ribreg_core::error::Side) -> &'static str {
-    match side {
-        ribreg_core::error::Side::Left => "left",
-        ribreg_core::error::Side::Right => "right",
-    }
 }
 
 /// Guided model: each rib side's span as a share of the template's, and the least

@@ -676,9 +676,8 @@ impl<const VOXELS: usize> Controller<VOXELS> {
 
 /// Marks the targets of a partial plan that are not driven to
 /// ([`crate::registration::reach::WaypointReach::supported`]); a plan that keeps none is
-/// refused with the first unreached waypoint's [`Error::NotReached`]. (Without a partial
-/// plan every target is reached already: an unreached one refused the plan as it was
-/// mapped.)
+/// refused ([`crate::registration::reach::check_plan`]). (Without a partial plan every
+/// target is reached already: an unreached one refused the plan as it was mapped.)
 fn mark_supported(targets: &mut [ProbeTarget]) -> Result<()> {
     let mut keep = [true; MAX_WAYPOINTS];
     for (k, t) in keep.iter_mut().zip(targets.iter()) {
@@ -688,15 +687,7 @@ fn mark_supported(targets: &mut [ProbeTarget]) -> Result<()> {
     for (t, k) in targets.iter_mut().zip(keep) {
         t.supported = k;
     }
-    if targets.iter().any(|t| t.supported) {
-        return Ok(());
-    }
-    for (i, t) in targets.iter().enumerate() {
-        if let Some(r) = t.reach {
-            r.check(i)?;
-        }
-    }
-    Ok(())
+    crate::registration::reach::check_plan(targets.iter().map(|t| t.reach.as_ref()), true)
 }
 
 /// The wire summary of how clearly `reg` found the patient.

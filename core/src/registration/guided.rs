@@ -1020,7 +1020,7 @@ pub fn check_sides(shares: &[[f32; 2]; 4]) -> Result<()> {
 }
 
 /// A length in mm as whole tenths of a mm, 0..=65,535 (`as` saturates; NaN is 0).
-fn tenths(mm: f32) -> u16 {
+pub(crate) fn tenths(mm: f32) -> u16 {
     (mm * 10.0 + 0.5) as u16
 }
 

@@ -22,6 +22,7 @@
 use crate::config::{RIBS, RIB_SAMPLES};
 use crate::error::{Error, Result, Side};
 use crate::limits::SKELETON_POINTS;
+use crate::registration::guided::tenths;
 use crate::registration::pipeline::{Registration, Template};
 use crate::Vec3;
 
@@ -127,10 +128,24 @@ impl WaypointReach {
     }
 }
 
-/// A length in mm as whole tenths of a mm, 0..=65,535 (`as` saturates: infinity is
-/// 65,535; NaN is 0).
-fn tenths(mm: f32) -> u16 {
-    (mm * 10.0 + 0.5) as u16
+/// Refuses a plan, given each waypoint's reach in plan order (`None`: not measured,
+/// the graph model): with `partial` only a plan that keeps no waypoint
+/// ([`WaypointReach::supported`]), otherwise any with a waypoint not reached. The
+/// refusal is the first unreached waypoint's [`Error::NotReached`].
+pub fn check_plan<'a, I>(plan: I, partial: bool) -> Result<()>
+where
+    I: Iterator<Item = Option<&'a WaypointReach>> + Clone,
+{
+    let kept = |r: Option<&WaypointReach>| r.is_none_or(|r| r.supported(plan.clone().flatten()));
+    if partial && plan.clone().any(kept) {
+        return Ok(());
+    }
+    for (i, r) in plan.enumerate() {
+        if let Some(r) = r {
+            r.check(i)?;
+        }
+    }
+    Ok(())
 }
 
 /// The two ribs (indices into [`RIBS`]) whose skeleton polylines (`skeleton`, the 30
@@ -250,6 +265,16 @@ mod tests {
         assert_eq!(kept, [false, false, true, false, false]);
         let whole = [inside, right, below, lower];
         assert!(whole.iter().all(|w| w.supported(&whole)));
+        // A plan: refused at its first unreached waypoint, unless partial and something
+        // is kept; a partial plan that keeps nothing is refused too.
+        let some = [Some(&inside), None, Some(&out), Some(&right)];
+        let e = check_plan(some.iter().copied(), false).unwrap_err();
+        assert!(matches!(e, Error::NotReached { waypoint: 2, .. }), "{e:?}");
+        assert_eq!(check_plan(some.iter().copied(), true), Ok(()));
+        let none_kept = [Some(&inside), Some(&out)];
+        let e = check_plan(none_kept.iter().copied(), true).unwrap_err();
+        assert!(matches!(e, Error::NotReached { waypoint: 1, .. }), "{e:?}");
+        assert_eq!(check_plan([None, Some(&right)].into_iter(), false), Ok(()));
     }
 
     #[test]
