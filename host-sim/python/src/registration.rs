@@ -12,7 +12,13 @@
 //! * The interpreter is released (`Python::detach`) while a template is prepared, a
 //!   registration runs or points are mapped.
 //! * Errors: bad input raises `ValueError` carrying the core's or the reader's message;
-//!   a file the operating system cannot read or write raises `OSError`.
+//!   a registration the core refuses (the CLI's exit 2: a rib side not seen, an
+//!   ambiguous pose, a waypoint the sweep does not reach, ...) raises `RegistrationError`,
+//!   a `ValueError` whose `code` is the core error's wire code (`error_summary`); a file
+//!   the operating system cannot read or write raises `OSError`.
+//! * Waypoints to drive to go through `register(..., waypoints=...)`, which checks each
+//!   one against what the sweep shows, as `ribreg register --waypoints` does;
+//!   `Registration.transform` maps any points and checks none.
 
 use numpy::ndarray::{Array1, Array2};
 use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArrayLike1, PyArrayLike2};
@@ -24,17 +30,39 @@ use ribreg_core::registration::local_rigid::TransformCache;
 use ribreg_core::registration::pipeline::{
     Registration as CoreRegistration, Template as CoreTemplate,
 };
-use ribreg_core::Vec3;
+use ribreg_core::wire::error_code;
+use ribreg_core::{Error as CoreError, Vec3};
 use ribreg_sim::io::prepared::TemplateFile;
 use ribreg_sim::io::{self, Cloud, IoError};
 use ribreg_sim::register::{
-    build_template, register_clouds, to_core, to_file, Mapped, Method, HOST_CACHE,
+    build_template, register_clouds, supported, to_core, to_file, Mapped, Method, Options,
+    HOST_CACHE,
 };
 use std::path::PathBuf;
 use std::time::Duration;
 
+pyo3::create_exception!(
+    ribreg._ribreg,
+    RegistrationError,
+    PyValueError,
+    "The core refused the registration (`ribreg register` exits 2): a rib side not seen, \
+     a sweep cut short, an ambiguous pose, a template the sweep does not support, a \
+     waypoint the sweep does not reach. A `ValueError`; `code` is the core error's wire \
+     code (`ribreg.error_summary(code)`), the message the CLI's."
+);
+
+/// A core error of a registration as `RegistrationError` with its wire code.
+fn refused(py: Python<'_>, e: &CoreError) -> PyErr {
+    let err = RegistrationError::new_err(e.to_string());
+    match err.value(py).setattr("code", error_code(e)) {
+        Ok(()) => err,
+        Err(setting) => setting,
+    }
+}
+
 /// Adds the registration API to the module.
 pub fn add(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("RegistrationError", m.py().get_type::<RegistrationError>())?;
     m.add_class::<Template>()?;
     m.add_class::<Registration>()?;
     m.add_function(wrap_pyfunction!(register, m)?)?;
@@ -247,13 +275,16 @@ impl Template {
 pub struct Registration {
     registration: Box<CoreRegistration>,
     registered: Vec<[f64; 3]>,
+    /// The mapped waypoints and whether each is supported, when waypoints were given.
+    waypoints: Option<(Vec<[f64; 3]>, Vec<bool>)>,
     report: String,
 }
 
 #[pymethods]
 impl Registration {
-    /// Maps points (any (N, 3) array-like, template frame, mm) into the target:
-    /// waypoints planned on the template, or any other cloud. Returns (N, 3) float64.
+    /// Maps points (any (N, 3) array-like, template frame, mm) into the target, and
+    /// checks none of them against what the sweep shows: for waypoints the probe is to
+    /// be driven to, give them to `register(..., waypoints=...)`. Returns (N, 3) float64.
     fn transform<'py>(
         &self,
         py: Python<'py>,
@@ -275,6 +306,24 @@ impl Registration {
     #[getter]
     fn registered<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
         to_array(py, &self.registered)
+    }
+
+    /// The waypoints given to `register`, mapped into the target, (M, 3) float64; `None`
+    /// when none were given (what `ribreg register --out-waypoints` writes).
+    #[getter]
+    fn waypoints<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray2<f64>>> {
+        self.waypoints.as_ref().map(|(w, _)| to_array(py, w))
+    }
+
+    /// Per mapped waypoint, whether the sweep supports it, (M,) bool: all `True` unless
+    /// `register` was called with `partial=True`, which marks (`False`) the waypoints
+    /// the sweep does not reach instead of refusing — never drive to those. `None`
+    /// without waypoints (the CSV's `supported` column of `ribreg register --partial`).
+    #[getter]
+    fn supported<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray1<bool>>> {
+        self.waypoints
+            .as_ref()
+            .map(|(_, s)| Array1::from(s.clone()).into_pyarray(py))
     }
 
     /// The report `ribreg register --report` writes, as a dict: the paired skeleton
@@ -319,19 +368,50 @@ impl Registration {
 /// `Template` already prepared from this same `template` cloud, to skip preparing it
 /// again. `method` is `"improved"` (default) or `"paper"` (the paper's method as
 /// published; no prepared template).
+///
+/// `waypoints` ((M, 3), template frame, mm) are mapped and each is checked against
+/// what the sweep shows, as `ribreg register --waypoints` does: a waypoint the sweep
+/// does not reach raises `RegistrationError` (code 24), or with `partial=True` is marked
+/// in `Registration.supported`. `target_up` is the patient's anterior in the target's
+/// frame, roughly (three numbers, `ribreg register --target-up`). `partial` and
+/// `target_up` need the improved method.
 #[pyfunction]
-#[pyo3(signature = (template, target, labels=None, *, method="improved", prepared=None))]
+#[pyo3(signature = (
+    template, target, labels=None, *, waypoints=None, partial=false, target_up=None,
+    method="improved", prepared=None
+))]
+#[allow(clippy::too_many_arguments)]
 fn register(
     py: Python<'_>,
     template: &Bound<'_, PyAny>,
     target: PyArrayLike2<'_, f64, AllowTypeChange>,
     labels: Option<PyArrayLike1<'_, i64, AllowTypeChange>>,
+    waypoints: Option<PyArrayLike2<'_, f64, AllowTypeChange>>,
+    partial: bool,
+    target_up: Option<PyArrayLike1<'_, f64, AllowTypeChange>>,
     method: &str,
     prepared: Option<PyRef<'_, Template>>,
 ) -> PyResult<Registration> {
     let method = method_of(method)?;
     let target = rows(&target, "target")?;
     let target = to_core(&target, Which::Target).map_err(value_err)?;
+    let waypoints = match &waypoints {
+        Some(w) => Some(to_core(&rows(w, "waypoints")?, Which::Query).map_err(value_err)?),
+        None => None,
+    };
+    let target_up = target_up.map(|v| direction(&v)).transpose()?;
+    if method == Method::Paper && (partial || target_up.is_some()) {
+        return Err(PyValueError::new_err(
+            "partial and target_up need the improved method (the paper's has no rib extents \
+             and no pose hypotheses)",
+        ));
+    }
+    let how = Options {
+        method,
+        target_up,
+        partial,
+        ..method.into()
+    };
     let given: Option<PyRef<'_, Template>> = template.extract().ok();
     if given.is_some() && (labels.is_some() || prepared.is_some()) {
         return Err(PyValueError::new_err(
@@ -363,8 +443,8 @@ fn register(
                     points,
                     true,
                     &target,
-                    None,
-                    method,
+                    waypoints.as_deref(),
+                    how,
                     Duration::ZERO,
                     &mut |_| {},
                 )
@@ -386,19 +466,45 @@ fn register(
                     &points,
                     labels.as_deref(),
                     &target,
-                    None,
-                    method,
+                    waypoints.as_deref(),
+                    how,
                     &mut |_| {},
                 )
             })
         }
     }
-    .map_err(value_err)?;
+    .map_err(|e| refused(py, &e))?;
+    let mapped = outcome.waypoints.as_deref().map(|w| {
+        // Only a partial plan marks waypoints: every other one was checked in full.
+        let marks = if partial {
+            supported(&outcome.reach)
+        } else {
+            vec![true; w.len()]
+        };
+        (to_file(w), marks)
+    });
     Ok(Registration {
         registered: to_file(&outcome.registered),
+        waypoints: mapped,
         report: outcome.report.to_string(),
         registration: outcome.registration,
     })
+}
+
+/// A direction of three finite numbers, not all zero (`ribreg register --target-up`).
+fn direction(v: &PyArrayLike1<'_, f64, AllowTypeChange>) -> PyResult<Vec3> {
+    let v: Vec<f64> = v.as_array().iter().copied().collect();
+    match v[..] {
+        [x, y, z]
+            if [x, y, z].iter().all(|c| c.is_finite() && c.abs() <= 1e30)
+                && (x, y, z) != (0.0, 0.0, 0.0) =>
+        {
+            Ok(Vec3::new(x as f32, y as f32, z as f32))
+        }
+        _ => Err(PyValueError::new_err(format!(
+            "target_up: expected a direction of three finite numbers, not all zero, got {v:?}"
+        ))),
+    }
 }
 
 /// Reads a point cloud in any format `ribreg` reads (PLY, PCD, XYZ, CSV; by the

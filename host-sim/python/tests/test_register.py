@@ -1,5 +1,6 @@
 """The numpy registration API against the CLI on phantoms, and its refusals."""
 
+import csv
 import subprocess
 import threading
 
@@ -32,9 +33,12 @@ def test_equals_cli(ribreg_bin, phantoms, tmp_path, seed, variant):
     template, labels = ribreg.read_cloud(ph / "template.ply")
     target, _ = ribreg.read_cloud(ph / "target.ply")
     waypoints, _ = ribreg.read_waypoints(ph / "waypoints.csv")
-    reg = ribreg.register(template, target, labels)
+    reg = ribreg.register(template, target, labels, waypoints=waypoints)
     assert np.abs(reg.registered - registered_cli).max() <= TOL_MM
+    assert np.abs(reg.waypoints - mapped_cli).max() <= TOL_MM
     assert np.abs(reg.transform(waypoints) - mapped_cli).max() <= TOL_MM
+    assert reg.supported.dtype == np.bool_ and reg.supported.all()
+    assert len(reg.report["waypoint_reach"]["waypoints"]) == len(waypoints)
     report = reg.report
     assert report["method"] == "improved"
     assert len(report["skeleton"]["template"]) == 30 == len(report["skeleton"]["target"])
@@ -153,6 +157,80 @@ def test_releases_the_interpreter(phantoms):
     assert ticks > 10_000
 
 
+def test_target_up_equals_the_cli(ribreg_bin, phantoms, tmp_path):
+    """`target_up` is `ribreg register --target-up`; a turned-away one is refused alike."""
+    ph = phantoms(1, "misaligned")
+    template, labels = ribreg.read_cloud(ph / "template.ply")
+    target, _ = ribreg.read_cloud(ph / "target.ply")
+    waypoints, _ = ribreg.read_waypoints(ph / "waypoints.csv")
+    up = ribreg.register(template, target, labels).rigid[:3, 2]  # the template's anterior
+    registered_cli, mapped_cli = cli_register(
+        ribreg_bin, ph, tmp_path, "--target-up", ",".join(f"{c:.6f}" for c in up))
+    reg = ribreg.register(template, target, labels, waypoints=waypoints,
+                          target_up=np.round(up, 6))
+    assert np.abs(reg.registered - registered_cli).max() <= TOL_MM
+    assert np.abs(reg.waypoints - mapped_cli).max() <= TOL_MM
+    # The opposite direction leaves no pose within 60 degrees of it.
+    cli = subprocess.run(
+        [ribreg_bin, "register", "-q", "--template", ph / "template.ply",
+         "--target", ph / "target.ply", "--out", tmp_path / "r.ply",
+         "--target-up", ",".join(f"{-c:.6f}" for c in up)],
+        capture_output=True, text=True)
+    with pytest.raises(ribreg.RegistrationError) as e:
+        ribreg.register(template, target, labels, target_up=-np.round(up, 6))
+    assert cli.returncode == 2 and str(e.value) in cli.stderr, (str(e.value), cli.stderr)
+    assert ribreg.error_summary(e.value.code) != "unknown error code"
+
+
+def beyond_ribs_3_and_4(template, labels):
+    """A planned point 20 mm beyond the left lateral ends of cartilages 3 and 4."""
+    ends = [template[(labels == rib) & (template[:, 0] > 0)] for rib in (3, 4)]
+    tips = [e[np.argmax(e[:, 0])] for e in ends]
+    return (tips[0] + tips[1]) / 2 + [20.0, 0.0, 0.0]
+
+
+def test_a_waypoint_the_sweep_does_not_reach_is_refused_or_marked(ribreg_bin, phantoms,
+                                                                   tmp_path):
+    """As `ribreg register`: refused (code 24) by default; with `partial=True` mapped and
+    marked, with every other waypoint on its side, and the same marks as the CLI's CSV."""
+    ph = phantoms(0)
+    template, labels = ribreg.read_cloud(ph / "template.ply")
+    target, _ = ribreg.read_cloud(ph / "target.ply")
+    planned, _ = ribreg.read_waypoints(ph / "waypoints.csv")
+    plan = np.vstack([planned, beyond_ribs_3_and_4(template, labels)])
+    path = tmp_path / "plan.csv"
+    np.savetxt(path, plan, delimiter=",", header="x,y,z", comments="", fmt="%.6f")
+    plan, _ = ribreg.read_waypoints(path)
+
+    def cli(*extra):
+        return subprocess.run(
+            [ribreg_bin, "register", "-q", "--template", ph / "template.ply",
+             "--target", ph / "target.ply", "--waypoints", path,
+             "--out", tmp_path / "registered.ply", "--out-waypoints", tmp_path / "mapped.csv",
+             *extra],
+            capture_output=True, text=True)
+
+    refused = cli()
+    with pytest.raises(ribreg.RegistrationError) as e:
+        ribreg.register(template, target, labels, waypoints=plan)
+    assert isinstance(e.value, ValueError) and e.value.code == 24
+    assert refused.returncode == 2 and str(e.value) in refused.stderr, refused.stderr
+    # Without waypoints the same registration is accepted: only the plan is refused.
+    ribreg.register(template, target, labels)
+
+    assert cli("--partial").returncode == 0
+    with open(tmp_path / "mapped.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    marks_cli = np.array([r["supported"] == "true" for r in rows])
+    reg = ribreg.register(template, target, labels, waypoints=plan, partial=True)
+    np.testing.assert_array_equal(reg.supported, marks_cli)
+    assert not reg.supported[-1]
+    left = plan[:, 0] > 0
+    assert not reg.supported[left].any() and reg.supported[~left].all()
+    mapped_cli, _ = ribreg.read_waypoints(tmp_path / "mapped.csv")
+    assert np.abs(reg.waypoints - mapped_cli).max() <= TOL_MM
+
+
 def test_bad_input_raises_value_error_with_the_core_message(phantoms):
     ph = phantoms(0)
     template, labels = ribreg.read_cloud(ph / "template.ply")
@@ -179,6 +257,14 @@ def test_bad_input_raises_value_error_with_the_core_message(phantoms):
     reg = ribreg.register(tpl, target)
     cases.append((lambda: reg.transform([[0.0, np.inf, 0.0]]), "NaN or infinite"))
     cases.append((lambda: ribreg.register(template, "abc", labels), ""))
+    cases.append((lambda: ribreg.register(template, target, labels, waypoints=[[1.0, 2.0]]),
+                  "waypoints"))
+    cases.append((lambda: ribreg.register(template, target, labels, target_up=[0, 0, 0]),
+                  "target_up"))
+    cases.append((lambda: ribreg.register(template, target, labels, target_up=[0, 1]),
+                  "target_up"))
+    cases.append((lambda: ribreg.register(template, target, labels, method="paper",
+                                          partial=True), "improved method"))
     for call, needle in cases:
         with pytest.raises(ValueError) as e:
             call()

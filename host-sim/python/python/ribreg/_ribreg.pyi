@@ -11,6 +11,7 @@ __all__ = [
     "__version__",
     "Template",
     "Registration",
+    "RegistrationError",
     "register",
     "read_cloud",
     "read_waypoints",
@@ -63,12 +64,23 @@ class Template:
         """The 30 skeleton points, (30, 3), mm."""
     def __len__(self) -> int: ...
 
+class RegistrationError(ValueError):
+    """The core refused the registration; ``code`` is its error code."""
+
+    code: int
+
 @final
 class Registration:
     """The non-rigid mapping template -> target found by ``register``."""
 
     def transform(self, points: _Points) -> npt.NDArray[np.float64]:
-        """Maps (N, 3) points from the template into the target."""
+        """Maps (N, 3) points from the template into the target; checks none of them."""
+    @property
+    def waypoints(self) -> Optional[npt.NDArray[np.float64]]:
+        """The waypoints given to ``register``, mapped, (M, 3); ``None`` without."""
+    @property
+    def supported(self) -> Optional[npt.NDArray[np.bool_]]:
+        """Per mapped waypoint, whether the sweep supports it, (M,); ``None`` without."""
     @property
     def registered(self) -> npt.NDArray[np.float64]:
         """The template's points mapped into the target, (N, 3)."""
@@ -84,10 +96,14 @@ def register(
     target: _Points,
     labels: Optional[npt.ArrayLike] = None,
     *,
+    waypoints: Optional[_Points] = None,
+    partial: bool = False,
+    target_up: Optional[npt.ArrayLike] = None,
     method: str = "improved",
     prepared: Optional[Template] = None,
 ) -> Registration:
-    """Registers the template onto the target (``method``: "improved" or "paper")."""
+    """Registers the template onto the target (``method``: "improved" or "paper"),
+    mapping and checking ``waypoints``."""
 
 def read_cloud(
     path: _Path,
