@@ -257,6 +257,17 @@ pub enum Error {
         /// Least accepted ratio of the two, percent.
         min_ratio_percent: u8,
     },
+    /// Both sides of the target look cut short by the sweep (guided model; see
+    /// [`crate::registration::guided::MIN_MEAN_SHARE`]): its ribs span much less of the
+    /// template's on average than any complete sweep does. A registration would squeeze
+    /// the template's ribs onto what is there and pull every lateral waypoint toward the
+    /// sternum.
+    SweepShort {
+        /// Mean span of the target's rib sides, percent of the template's.
+        percent: u8,
+        /// Least accepted, percent.
+        min_percent: u8,
+    },
     /// The sweep does not show a waypoint's gap as far out as the waypoint lies (guided
     /// model; see [`crate::registration::reach`]): a sweep hole or a lost lateral tip
     /// took a bounding cartilage there, and the waypoint would be placed by the
@@ -441,6 +452,16 @@ impl fmt::Display for Error {
                  of the template's there against {other_percent} % on the other side (at least \
                  {min_ratio_percent} % of the other side's is needed); scan that side out to the \
                  ends of the cartilages and register again"
+            ),
+            Error::SweepShort {
+                percent,
+                min_percent,
+            } => write!(
+                f,
+                "the sweep looks cut short on both sides: the ribs span {percent} % of the \
+                 template's on average (at least {min_percent} % is needed); scan both sides out \
+                 to the ends of the cartilages and register again, or use a template whose \
+                 cartilages are not much longer than the patient's"
             ),
             Error::NotReached {
                 waypoint,

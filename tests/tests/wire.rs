@@ -959,11 +959,11 @@ fn corrupted_frames_are_refused() {
 fn error_codes_have_summaries() {
     use ribreg_core::error::Side;
     use ribreg_core::Error;
-    for code in 1..=25 {
+    for code in 1..=26 {
         assert_ne!(wire::error_summary(code), "unknown error", "code {code}");
     }
     assert_eq!(wire::error_summary(0), "unknown error");
-    assert_eq!(wire::error_summary(26), "unknown error");
+    assert_eq!(wire::error_summary(27), "unknown error");
     let not_seen = Error::NotSeen {
         rib: 5,
         side: Side::Right,
@@ -994,6 +994,15 @@ fn error_codes_have_summaries() {
          cartilage out to its lateral end and register again, or map only the waypoints the \
          sweep reaches (a partial plan)"
     );
+    let narrow = Error::SweepShort {
+        percent: 68,
+        min_percent: 77,
+    };
+    assert_eq!(wire::error_code(&narrow), 26);
+    assert!(wire::error_summary(26).contains("both sides"));
+    assert!(narrow
+        .to_string()
+        .contains("68 % of the template's on average"));
     let fault = wire::Fault::Registration(wire::error_code(&not_seen));
     assert_eq!(
         fault.to_string(),

@@ -446,6 +446,10 @@ pub fn error_summary(code: u8) -> &'static str {
             "the sweep looks cut short on one side (scan that side out to the cartilages' \
                ends and register again)"
         }
+        26 => {
+            "the sweep looks cut short on both sides (scan both sides out to the \
+               cartilages' ends and register again)"
+        }
         _ => "unknown error",
     }
 }
@@ -492,5 +496,6 @@ pub fn error_code(e: &crate::error::Error) -> u8 {
         E::Unsupported { .. } => 23,
         E::NotReached { .. } => 24,
         E::SideShort { .. } => 25,
+        E::SweepShort { .. } => 26,
     }
 }
