@@ -263,7 +263,9 @@ pub enum Error {
     /// the template's ribs onto what is there and pull every lateral waypoint toward the
     /// sternum.
     SweepShort {
-        /// Mean span of the target's rib sides, percent of the template's.
+        /// The ribs measured: from this rib (2 or 4) to rib 5, both sides.
+        from_rib: u8,
+        /// Mean span of those rib sides in the target, percent of the template's.
         percent: u8,
         /// Least accepted, percent.
         min_percent: u8,
@@ -454,15 +456,24 @@ impl fmt::Display for Error {
                  ends of the cartilages and register again"
             ),
             Error::SweepShort {
+                from_rib,
                 percent,
                 min_percent,
-            } => write!(
-                f,
-                "the sweep looks cut short on both sides: the ribs span {percent} % of the \
-                 template's on average (at least {min_percent} % is needed); scan both sides out \
-                 to the ends of the cartilages and register again, or use a template whose \
-                 cartilages are not much longer than the patient's"
-            ),
+            } => {
+                f.write_str("the sweep looks cut short on both sides: ")?;
+                if from_rib <= 2 {
+                    f.write_str("the ribs span")?;
+                } else {
+                    write!(f, "ribs {from_rib}–5 span")?;
+                }
+                write!(
+                    f,
+                    " {percent} % of the template's on average (at least {min_percent} % is \
+                     needed); scan both sides out to the ends of the cartilages and register \
+                     again, or use a template whose cartilages are not much longer than the \
+                     patient's"
+                )
+            }
             Error::NotReached {
                 waypoint,
                 rib,

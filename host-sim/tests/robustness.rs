@@ -430,6 +430,21 @@ fn a_sweep_that_stops_short_on_both_sides_is_refused() {
     }
 }
 
+/// A sweep whose band of probe lines is too narrow (nothing farther from the midline
+/// than 0.6 of each side's outermost cartilage) cuts ribs 4 and 5 most and leaves
+/// ribs 2 and 3 nearly whole: refused as such. Each of these was a silent failure
+/// with the mean share of all ribs alone.
+#[test]
+fn a_sweep_band_too_narrow_is_refused() {
+    for (seed, p) in [(9, pair(9)), (13, pair(13)), (13, hard(13)), (22, hard(22))] {
+        let e = run(&Case::Band.apply(&p, seed));
+        assert!(
+            matches!(e, Err(Error::SweepShort { from_rib: 4, .. })),
+            "seed {seed}: {e:?}"
+        );
+    }
+}
+
 fn core_side(side: Side) -> ribreg_core::error::Side {
     match side {
         Side::Left => ribreg_core::error::Side::Left,

@@ -995,6 +995,7 @@ fn error_codes_have_summaries() {
          sweep reaches (a partial plan)"
     );
     let narrow = Error::SweepShort {
+        from_rib: 2,
         percent: 68,
         min_percent: 77,
     };

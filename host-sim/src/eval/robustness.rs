@@ -10,7 +10,12 @@
 //! - `sparse`: [`SPARSE_FRACTION`] of the sweep's points, at random (complete coverage);
 //! - `left side missing`, `right side missing`, `rib 5 missing`: that cartilage's points
 //!   removed (outliers and the sternum kept). These sweeps cannot support every waypoint:
-//!   the product's goal is that they are refused.
+//!   the product's goal is that they are refused;
+//! - `left side stops short`, `right side stops short`, `both sides stop short`: the
+//!   cartilages beyond [`SHORT_SIDE_S`] of their length left out on that side or both;
+//!   `both sides stop at a line`: everything farther from the midline than
+//!   [`SHORT_SIDE_S`] of each side's outermost cartilage left out, as a band of probe
+//!   lines too narrow leaves it. The lateral waypoints are not reached: refused too.
 //!
 //! A hard phantom's own sweep holes can do the same to any case: a run whose sweep does
 //! not reach a waypoint ([`PhantomPair::unreached_waypoints`]) is counted apart
@@ -62,6 +67,11 @@ pub enum Case {
     /// The sweep stops short on both sides (a band too narrow): every cartilage beyond
     /// [`SHORT_SIDE_S`] of its length not scanned.
     Narrow,
+    /// The sweep stops short on both sides at one lateral position, as a band of probe
+    /// lines too narrow does: nothing (cartilage or outlier) farther from the midline
+    /// than [`SHORT_SIDE_S`] of the side's outermost cartilage point, in the patient's
+    /// frame. The shorter cartilages keep more of their length than the longer ones.
+    Band,
 }
 
 impl Case {
@@ -79,6 +89,7 @@ impl Case {
             Case::ShortSide(Side::Left),
             Case::ShortSide(Side::Right),
             Case::Narrow,
+            Case::Band,
         ]);
         v
     }
@@ -95,6 +106,7 @@ impl Case {
             Case::ShortSide(Side::Left) => "left side stops short".into(),
             Case::ShortSide(Side::Right) => "right side stops short".into(),
             Case::Narrow => "both sides stop short".into(),
+            Case::Band => "both sides stop at a line".into(),
         }
     }
 
@@ -103,7 +115,11 @@ impl Case {
     pub fn complete(self) -> bool {
         !matches!(
             self,
-            Case::SideMissing(_) | Case::Rib5Missing | Case::ShortSide(_) | Case::Narrow
+            Case::SideMissing(_)
+                | Case::Rib5Missing
+                | Case::ShortSide(_)
+                | Case::Narrow
+                | Case::Band
         )
     }
 
@@ -111,7 +127,29 @@ impl Case {
     /// the truth (pose, true waypoints) moved with them. `seed` drives the random choices.
     pub fn apply(self, pair: &PhantomPair, seed: u64) -> PhantomPair {
         let mut rng = Rng::new(seed ^ 0x005E_ED0F_0B05_u64.wrapping_mul(self.stream()));
-        let keep = |m: &Option<crate::phantom::Material>, rng: &mut Rng| match (self, m) {
+        // Band: lateral positions in the patient's frame, and each side's limit.
+        let back = pair.pose.inverse();
+        let lateral = |p: &[f64; 3]| back.apply(*p)[0];
+        let mut outermost = [0.0f64; 2];
+        for (p, m) in pair.target.iter().zip(&pair.target_material) {
+            if let Some(crate::phantom::Material {
+                part: Part::Cartilage { side, .. },
+                ..
+            }) = m
+            {
+                let o = &mut outermost[side.index()];
+                *o = o.max(lateral(p).abs());
+            }
+        }
+        let within = |p: &[f64; 3]| {
+            let x = lateral(p);
+            let side = if x >= 0.0 { Side::Left } else { Side::Right };
+            x.abs() <= SHORT_SIDE_S * outermost[side.index()]
+        };
+        let keep = |p: &[f64; 3], m: &Option<crate::phantom::Material>, rng: &mut Rng| match (
+            self, m,
+        ) {
+            (Case::Band, _) => within(p),
             (Case::Sparse, _) => rng.next_f64() < SPARSE_FRACTION,
             (Case::SideMissing(s), Some(m)) => {
                 !matches!(m.part, Part::Cartilage { side, .. } if side == s)
@@ -129,7 +167,7 @@ impl Case {
             .target
             .iter()
             .zip(&pair.target_material)
-            .filter(|(_, m)| keep(m, &mut rng))
+            .filter(|(p, m)| keep(p, m, &mut rng))
             .map(|(p, m)| (*p, *m))
             .unzip();
         let moved = match self {
@@ -166,6 +204,7 @@ impl Case {
             Case::ShortSide(Side::Left) => 2004,
             Case::ShortSide(Side::Right) => 2005,
             Case::Narrow => 2006,
+            Case::Band => 2007,
         }
     }
 }
@@ -214,7 +253,8 @@ pub enum Coverage {
     /// The case cuts a side or rib 5 away.
     Cut,
     /// The case stops the sweep short on one side or both ([`Case::ShortSide`],
-    /// [`Case::Narrow`]): the lateral waypoints there are not reached, the others are.
+    /// [`Case::Narrow`], [`Case::Band`]): the lateral waypoints there are not reached,
+    /// the others are.
     Short,
 }
 
@@ -222,7 +262,9 @@ impl Coverage {
     /// The coverage of `case`'s sweep, which does not reach the waypoints `unreached`.
     pub fn of(case: Case, unreached: &[usize]) -> Coverage {
         match (case.complete(), unreached.is_empty()) {
-            (false, _) if matches!(case, Case::ShortSide(_) | Case::Narrow) => Coverage::Short,
+            (false, _) if matches!(case, Case::ShortSide(_) | Case::Narrow | Case::Band) => {
+                Coverage::Short
+            }
             (false, _) => Coverage::Cut,
             (true, true) => Coverage::Complete,
             (true, false) => Coverage::Holes,
@@ -455,8 +497,9 @@ fn markdown(cfg: &EvalConfig, results: &[RobustResult]) -> String {
          seen past it; holes hide a waypoint, the case cuts nothing but the phantom's own \
          sweep holes leave a cartilage short of a waypoint (no registration can support \
          it: a refusal is right); stops short, the sweep leaves one side's cartilages or \
-         both sides' beyond {SHORT_SIDE_S} of their length out (the lateral waypoints \
-         there are not reached); side or rib 5 cut, the cut cases. Partial: runs reported as a \
+         both sides' beyond {SHORT_SIDE_S} of their length out, or everything farther from \
+         the midline than {SHORT_SIDE_S} of each side's outermost cartilage (the lateral \
+         waypoints there are not reached); side or rib 5 cut, the cut cases. Partial: runs reported as a \
          success with waypoints marked as not reached by the sweep (a partial mapping; \
          they are never driven to, and the other columns judge the rest).\n",
         cfg.pairs,
