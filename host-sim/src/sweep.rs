@@ -56,6 +56,11 @@ pub const TRACKER_COLUMNS: [&str; 4] = ["t", "x", "y", "z"];
 /// Columns of `calib_video.csv`.
 pub const VIDEO_COLUMNS: [&str; 2] = ["t", "row"];
 
+/// Least [`SweepConfig::margin_mm`]: lines stopping 60 mm inside the cartilages'
+/// lateral extent on each side still cross the sternum and every rib's medial half (the
+/// phantoms' chests span 200–260 mm).
+pub const MIN_MARGIN_MM: f64 = -60.0;
+
 /// Simulated sweep settings (`ribreg phantom sweep`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SweepConfig {
@@ -65,7 +70,9 @@ pub struct SweepConfig {
     pub line_spacing_mm: f64,
     /// Probe speed along the path, mm/s.
     pub speed_mm_s: f64,
-    /// Overrun of each line beyond the cartilages' lateral extent, mm.
+    /// Overrun of each line beyond the cartilages' lateral extent, mm; negative, each
+    /// line stops that far inside it (a sweep band too narrow: the tests of a sweep
+    /// that stops short), down to [`MIN_MARGIN_MM`].
     pub margin_mm: f64,
     /// Soft tissue over the chest reference surface (skin height above it), mm.
     pub skin_offset_mm: f64,
@@ -135,8 +142,10 @@ impl SweepConfig {
         if !(0.0..1.0).contains(&self.frame_miss_rate) {
             return bad("frame miss rate must be in [0, 1)");
         }
+        if !(self.margin_mm >= MIN_MARGIN_MM && self.margin_mm <= 1e4) {
+            return bad("the margin must be at least -60 mm (lines stopping short) and finite");
+        }
         let noises = [
-            self.margin_mm,
             self.skin_offset_mm,
             self.pixel_noise_px,
             self.tracker_noise_mm,
@@ -145,7 +154,7 @@ impl SweepConfig {
             self.calibration_amplitude_mm,
         ];
         if !noises.into_iter().all(nonneg) || !pos(self.calibration_duration_s) {
-            return bad("margins, offsets, noises and amplitudes must be non-negative");
+            return bad("offsets, noises and amplitudes must be non-negative");
         }
         Ok(())
     }

@@ -226,3 +226,31 @@ fn a_waypoint_the_sweep_cannot_reach_refuses_the_plan_or_is_left_out_of_a_partia
     }
     assert!(r.max_error() <= hil::TOLERANCE_MM, "{}", r.max_error());
 }
+
+/// A sweep whose lines stop 40 mm inside the cartilages' lateral extent on both sides
+/// (`ribreg hil --sweep-margin-mm -40`): the controller refuses to register it (fault
+/// code 26, a sweep cut short on both sides) and never drives the probe. On seeds 0–19
+/// it refuses 19 (the 20th lands 19.7 mm off: the README's limits).
+#[test]
+fn a_sweep_band_too_narrow_is_refused_by_the_controller() {
+    let mut options = RunOptions::default();
+    options.sweep.margin_mm = -40.0;
+    for seed in [0, 1] {
+        let phantom = PhantomConfig {
+            seed,
+            ..PhantomConfig::default()
+        };
+        let e = hil::run_with(
+            &mut Session::new(InProcess::new()),
+            &phantom,
+            options.clone(),
+            &mut |_| {},
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("cut short on both sides") && e.contains("code 26"),
+            "seed {seed}: {e}"
+        );
+    }
+}

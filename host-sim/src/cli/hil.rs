@@ -41,6 +41,11 @@ pub struct Args {
     /// sweep does not reach and never drives there (by default it refuses the plan).
     #[arg(long)]
     partial: bool,
+    /// How far each line of the simulated sweep runs past the cartilages' lateral
+    /// extent, mm (default 10); negative, the lines stop that far inside it: a sweep
+    /// band too narrow, which the controller should refuse (down to -60).
+    #[arg(long, value_name = "MM", allow_negative_numbers = true)]
+    sweep_margin_mm: Option<f64>,
     /// The emulated board: `mps2-an386` (QEMU's MPS2, the default) or `f405` (the
     /// STM32F405 under QEMU's netduinoplus2).
     #[arg(long, default_value = "mps2-an386", value_parser = parse_board, conflicts_with_all = ["in_process", "port"])]
@@ -56,7 +61,7 @@ pub struct Args {
 }
 
 pub fn run(args: &Args, ctx: &Context) -> Result<(), CliError> {
-    let options = RunOptions {
+    let mut options = RunOptions {
         partial: args.partial,
         ..if args.quick {
             RunOptions::quick()
@@ -64,6 +69,9 @@ pub fn run(args: &Args, ctx: &Context) -> Result<(), CliError> {
             RunOptions::default()
         }
     };
+    if let Some(margin) = args.sweep_margin_mm {
+        options.sweep.margin_mm = margin;
+    }
     let faults = args.faults.then_some((Faults::DEFAULT, args.fault_seed));
     let phantom = &args.phantom.config();
     let progress = &mut |l: &str| ctx.progress(l);

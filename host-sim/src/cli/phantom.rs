@@ -56,6 +56,10 @@ struct SweepArgs {
     /// Fraction of frames lost.
     #[arg(long, default_value_t = 0.05)]
     miss_rate: f64,
+    /// How far each line runs past the cartilages' lateral extent, mm; negative, the
+    /// lines stop that far inside it (a sweep band too narrow; down to -60).
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
+    margin_mm: f64,
 }
 
 impl SweepArgs {
@@ -66,6 +70,7 @@ impl SweepArgs {
             line_spacing_mm: self.line_spacing_mm,
             pixel_noise_px: self.pixel_noise_px,
             frame_miss_rate: self.miss_rate,
+            margin_mm: self.margin_mm,
             ..SweepConfig::default()
         }
     }

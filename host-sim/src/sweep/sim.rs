@@ -513,6 +513,24 @@ mod tests {
         assert!((r.matrix().determinant() - 1.0).abs() < 1e-9);
     }
 
+    /// A negative margin stops the lines inside the cartilages' extent, down to
+    /// [`crate::sweep::MIN_MARGIN_MM`]; below it, or not finite, the settings are refused.
+    #[test]
+    fn the_margin_may_stop_the_lines_short_within_bounds() {
+        use crate::sweep::{SweepConfig, MIN_MARGIN_MM};
+        let with = |margin_mm| SweepConfig {
+            margin_mm,
+            ..SweepConfig::default()
+        };
+        for ok in [10.0, 0.0, -20.0, MIN_MARGIN_MM] {
+            assert!(with(ok).validate().is_ok(), "{ok}");
+        }
+        for bad in [MIN_MARGIN_MM - 1.0, f64::NAN, f64::INFINITY] {
+            let e = with(bad).validate().unwrap_err().to_string();
+            assert!(e.contains("margin"), "{bad}: {e}");
+        }
+    }
+
     #[test]
     fn serpentine_path_visits_every_line() {
         let p = ScanPath::serpentine(-100.0, 100.0, 50.0, -30.0, 10.0);
