@@ -611,7 +611,23 @@ fn coverage_json(reg: &Registration) -> Value {
         .zip(&spans)
         .map(|(rib, [right, left])| json!({ "rib": rib, "right": right, "left": left }))
         .collect();
-    json!({ "min_side_span": guided::MIN_SIDE_SPAN, "side_spans": ribs })
+    let m = guided::ShareMeans::of(&spans);
+    // JSON has no NaN: a rib side not seen makes a mean `null`.
+    let finite = |v: f32| v.is_finite().then_some(v);
+    json!({
+        "min_side_span": guided::MIN_SIDE_SPAN,
+        "side_spans": ribs,
+        "means": {
+            "right": finite(m.right),
+            "left": finite(m.left),
+            "all": finite(m.all),
+            "ribs_4_5": finite(m.lower),
+        },
+        "short_side_share": guided::SHORT_SIDE_SHARE,
+        "min_side_ratio": guided::MIN_SIDE_RATIO,
+        "min_mean_share": guided::MIN_MEAN_SHARE,
+        "min_lower_share": guided::MIN_LOWER_SHARE,
+    })
 }
 
 /// Guided model: the refined pose hypotheses' residuals and the accepted bounds

@@ -158,6 +158,21 @@ fn register_writes_every_output_in_template_order() {
         .is_none_or(|m| m >= pose["min_margin"].as_f64().unwrap());
     assert!(supported || clear, "{pose}");
     assert!(pose["hypotheses"].as_u64().unwrap() >= 1);
+    // The rib coverage beside its bounds: an accepted sweep is within every one.
+    let cov = &report["coverage"];
+    let means = &cov["means"];
+    let at = |v: &serde_json::Value| v.as_f64().unwrap();
+    assert!(at(&means["all"]) >= at(&cov["min_mean_share"]), "{cov}");
+    assert!(
+        at(&means["ribs_4_5"]) >= at(&cov["min_lower_share"]),
+        "{cov}"
+    );
+    let (r, l) = (at(&means["right"]), at(&means["left"]));
+    assert!((at(&means["all"]) - 0.5 * (r + l)).abs() < 1e-6, "{cov}");
+    assert!(
+        r.min(l) >= at(&cov["short_side_share"])
+            || r.min(l) >= at(&cov["min_side_ratio"]) * r.max(l)
+    );
 }
 
 #[test]

@@ -1030,8 +1030,12 @@ pub const MIN_LOWER_SHARE: f32 = 0.74;
 /// sternum, however closely the sweep supports what it shows. NaN shares (a rib side
 /// not seen) are left to [`check_coverage`].
 pub fn check_sides(shares: &[[f32; 2]; 4]) -> Result<()> {
-    let mean = |side: usize| shares.iter().map(|s| s[side]).sum::<f32>() / 4.0;
-    let (right, left) = (mean(0), mean(1));
+    let ShareMeans {
+        right,
+        left,
+        all: both,
+        lower,
+    } = ShareMeans::of(shares);
     let (short, other, side) = if right <= left {
         (right, left, Side::Right)
     } else {
@@ -1046,8 +1050,6 @@ pub fn check_sides(shares: &[[f32; 2]; 4]) -> Result<()> {
             min_ratio_percent: percent(MIN_SIDE_RATIO),
         });
     }
-    let both = 0.5 * (right + left);
-    let lower = shares[2..].iter().flatten().sum::<f32>() / 4.0;
     for (from_rib, share, min) in [(2, both, MIN_MEAN_SHARE), (4, lower, MIN_LOWER_SHARE)] {
         if share < min {
             return Err(Error::SweepShort {
@@ -1058,6 +1060,34 @@ pub fn check_sides(shares: &[[f32; 2]; 4]) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The means of [`side_shares`] that [`check_sides`] compares with its bounds (NaN
+/// where a share is NaN): `register --report` shows them beside the bounds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShareMeans {
+    /// The right side's four ribs.
+    pub right: f32,
+    /// The left side's four ribs.
+    pub left: f32,
+    /// All eight rib sides.
+    pub all: f32,
+    /// Ribs 4 and 5, both sides.
+    pub lower: f32,
+}
+
+impl ShareMeans {
+    /// The means of `shares` (`[right, left]` per rib 2..=5).
+    pub fn of(shares: &[[f32; 2]; 4]) -> Self {
+        let mean = |side: usize| shares.iter().map(|s| s[side]).sum::<f32>() / 4.0;
+        let (right, left) = (mean(0), mean(1));
+        ShareMeans {
+            right,
+            left,
+            all: 0.5 * (right + left),
+            lower: shares[2..].iter().flatten().sum::<f32>() / 4.0,
+        }
+    }
 }
 
 /// A length in mm as whole tenths of a mm, 0..=65,535 (`as` saturates; NaN is 0).
