@@ -204,13 +204,18 @@ fn parse_direction(text: &str) -> Result<Vec3, String> {
         .split(',')
         .map(|t| t.trim().parse::<f32>().map_err(|e| format!("{t:?}: {e}")))
         .collect::<Result<_, _>>()?;
+    direction(&v).ok_or_else(|| {
+        format!("{text:?}: expected a direction X,Y,Z (three finite numbers, not all zero)")
+    })
+}
+
+/// A direction for [`Options::target_up`]: three finite numbers, not all zero.
+pub fn direction(v: &[f32]) -> Option<Vec3> {
     match v[..] {
         [x, y, z] if v.iter().all(|c| c.is_finite()) && (x, y, z) != (0.0, 0.0, 0.0) => {
-            Ok(Vec3::new(x, y, z))
+            Some(Vec3::new(x, y, z))
         }
-        _ => Err(format!(
-            "{text:?}: expected a direction X,Y,Z (three finite numbers, not all zero)"
-        )),
+        _ => None,
     }
 }
 

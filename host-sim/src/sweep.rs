@@ -143,7 +143,10 @@ impl SweepConfig {
             return bad("frame miss rate must be in [0, 1)");
         }
         if !(self.margin_mm >= MIN_MARGIN_MM && self.margin_mm <= 1e4) {
-            return bad("the margin must be at least -60 mm (lines stopping short) and finite");
+            return Err(CliError::value(format!(
+                "sweep: the margin must be at least {MIN_MARGIN_MM} mm (lines stopping short) \
+                 and finite"
+            )));
         }
         let noises = [
             self.skin_offset_mm,

@@ -491,20 +491,14 @@ fn register(
     })
 }
 
-/// A direction of three finite numbers, not all zero (`ribreg register --target-up`).
+/// `ribreg register --target-up`'s direction: three finite numbers, not all zero.
 fn direction(v: &PyArrayLike1<'_, f64, AllowTypeChange>) -> PyResult<Vec3> {
-    let v: Vec<f64> = v.as_array().iter().copied().collect();
-    match v[..] {
-        [x, y, z]
-            if [x, y, z].iter().all(|c| c.is_finite() && c.abs() <= 1e30)
-                && (x, y, z) != (0.0, 0.0, 0.0) =>
-        {
-            Ok(Vec3::new(x as f32, y as f32, z as f32))
-        }
-        _ => Err(PyValueError::new_err(format!(
+    let v: Vec<f32> = v.as_array().iter().map(|&c| c as f32).collect();
+    ribreg_sim::register::direction(&v).ok_or_else(|| {
+        PyValueError::new_err(format!(
             "target_up: expected a direction of three finite numbers, not all zero, got {v:?}"
-        ))),
-    }
+        ))
+    })
 }
 
 /// Reads a point cloud in any format `ribreg` reads (PLY, PCD, XYZ, CSV; by the

@@ -131,7 +131,13 @@ impl Case {
         let back = pair.pose.inverse();
         let lateral = |p: &[f64; 3]| back.apply(*p)[0];
         let mut outermost = [0.0f64; 2];
-        for (p, m) in pair.target.iter().zip(&pair.target_material) {
+        let band = self == Case::Band;
+        for (p, m) in pair
+            .target
+            .iter()
+            .zip(&pair.target_material)
+            .filter(|_| band)
+        {
             if let Some(crate::phantom::Material {
                 part: Part::Cartilage { side, .. },
                 ..
