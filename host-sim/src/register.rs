@@ -630,6 +630,7 @@ fn coverage_json(reg: &Registration) -> Value {
         },
         "short_side_share": guided::SHORT_SIDE_SHARE,
         "min_side_ratio": guided::MIN_SIDE_RATIO,
+        "min_long_side_ratio": guided::MIN_LONG_SIDE_RATIO,
         "min_mean_share": guided::MIN_MEAN_SHARE,
         "min_lower_share": guided::MIN_LOWER_SHARE,
     })
