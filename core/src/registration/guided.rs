@@ -1991,8 +1991,9 @@ mod tests {
 
     /// A side short of the other and of the template is refused, and far short of the
     /// other alone (a patient with long cartilages); short of the other by a patient's
-    /// margin, or of the template alone by one (short ones on both), it is not; both sides far short of the
-    /// template are refused as a sweep that stopped short on both.
+    /// margin, or of the template alone by one (short ones on both), it is not; both
+    /// sides far short of the template are refused as a sweep that stopped short on
+    /// both.
     #[test]
     fn a_side_cut_short_is_refused_a_small_patient_is_not() {
         let shares = |right: f32, left: f32| [[right, left]; 4];
