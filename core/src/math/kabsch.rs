@@ -344,18 +344,22 @@ mod tests {
         assert!((fit.translation - t).norm() < 1e-3);
     }
 
+    /// `H` of the pairs `a → b` in f64, scaled to max |·| = 1 as [`PairSums::fit`] does.
+    fn scaled_cross_covariance(a: &[Vec3], b: &[Vec3]) -> M3 {
+        let (ca, cb) = (centroid64(a), centroid64(b));
+        let mut h = M3::zeros();
+        for (p, q) in a.iter().zip(b) {
+            h += (p.cast::<f64>() - ca) * (q.cast::<f64>() - cb).transpose();
+        }
+        h / h.abs().max()
+    }
+
     #[test]
     fn horn_agrees_with_svd() {
         let a = cloud();
         let rot = Rotation3::from_euler_angles(0.3, -1.1, 2.9);
         let b: [Vec3; 10] = core::array::from_fn(|i| rot * a[i]);
-        let ca = centroid64(&a);
-        let cb = centroid64(&b);
-        let mut h = M3::zeros();
-        for (p, q) in a.iter().zip(&b) {
-            h += (p.cast::<f64>() - ca) * (q.cast::<f64>() - cb).transpose();
-        }
-        let h = h / h.abs().max();
+        let h = scaled_cross_covariance(&a, &b);
         let r1 = rotation_svd(&h).unwrap();
         let r2 = rotation_horn(&h).unwrap();
         let r3 = rotation_newton(&h).unwrap();
@@ -389,12 +393,7 @@ mod tests {
                     rot * Vec3::new(mirror * p.x, p.y, p.z) + Vec3::new(5.0 * next(), 0.0, 1.0)
                 })
                 .collect();
-            let (ca, cb) = (centroid64(&a), centroid64(&b));
-            let mut h = M3::zeros();
-            for (p, q) in a.iter().zip(&b) {
-                h += (p.cast::<f64>() - ca) * (q.cast::<f64>() - cb).transpose();
-            }
-            let h = h / h.abs().max();
+            let h = scaled_cross_covariance(&a, &b);
             let svd = rotation_svd(&h).unwrap();
             let newton = rotation_newton(&h).unwrap();
             assert!((svd - newton).abs().max() < 1e-9, "case {case}");
