@@ -41,8 +41,9 @@ pub struct Config {
     /// considered. `None`: no prior, any pose.
     pub target_up: Option<crate::Vec3>,
     /// Guided model: lengthen a rib side the target shows shorter, against the
-    /// template, than every other rib side
-    /// ([`crate::registration::guided::lengthen_short`]). The paper has no such step.
+    /// template, than every other rib side, or much shorter than the same rib's other
+    /// side ([`crate::registration::guided::lengthen_short`]). The paper has no such
+    /// step.
     pub lengthen_short_ribs: bool,
     /// Guided model: from the second round on, take each rib on to where the cloud's
     /// points reach beyond its ends, on the template as on the target
