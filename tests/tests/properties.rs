@@ -12,6 +12,9 @@
 //! registration onto a moved copy        mapped waypoints ≤ 1 mm from the truth, mean
 //!                                       ≤ 0.1 mm (measured on the large rotations: max 8.6e-4 mm,
 //!                                       mean 3.0e-4 mm)
+//! short rib sides lengthened            never shorter, the midline kept; a seen side at
+//!                                       least 0.9 of its other side's share, at most
+//!                                       the largest share shown (1e-4 of the share)
 //! ```
 
 use proptest::prelude::*;
@@ -307,5 +310,64 @@ fn labelled_registration_recovers_rigid_motion() {
             max <= 1.0 && mean <= 0.1,
             "{deg}° about {ax:?}: waypoints off by max {max} mean {mean} mm"
         );
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 512, ..ProptestConfig::default() })]
+
+    /// `guided::lengthen_short` only lengthens: every rib keeps its midline and each
+    /// side at least its own span; a side the sweep shows (a share of the template's at
+    /// least `MIN_SIDE_SPAN`) ends with at least `COUNTERPART_SHARE` of its other
+    /// side's share; none is taken past the largest share any side shows; a side below
+    /// `MIN_SIDE_SPAN` is left for the coverage check. Templates of random spans per rib
+    /// side, the sternum anywhere within the rib, shares 0.3–1.4 of the template's.
+    #[test]
+    fn short_rib_sides_are_only_lengthened(
+        spans in prop::array::uniform4([40.0..130.0f32, 40.0..130.0f32]),
+        shares in prop::array::uniform4([0.3..1.4f32, 0.3..1.4f32]),
+        mid in -20.0..20.0f32,
+    ) {
+        use ribreg_core::config::RIB_SAMPLES;
+        use ribreg_core::limits::SKELETON_POINTS;
+        use ribreg_core::registration::guided::{lengthen_short, COUNTERPART_SHARE, MIN_SIDE_SPAN};
+        // The template's skeleton: each rib from -right to +left at equal steps, split at 0.
+        let mut prior = [Vec3::zeros(); SKELETON_POINTS];
+        let mut split = [0.5f32; 4];
+        let mut offset = 0;
+        for (r, &n) in RIB_SAMPLES.iter().enumerate() {
+            let [right, left] = spans[r];
+            for k in 0..n {
+                let x = -right + (right + left) * k as f32 / (n - 1) as f32;
+                prior[offset + k] = Vec3::new(x, -30.0 * r as f32, 0.0);
+            }
+            split[r] = right / (right + left);
+            offset += n;
+        }
+        let ends: [(f32, f32, f32); 4] = core::array::from_fn(|r| {
+            let ([right, left], [sr, sl]) = (spans[r], shares[r]);
+            (mid - sr * right, mid, mid + sl * left)
+        });
+        let out = lengthen_short(&ends, &split, &prior);
+        let largest = shares.iter().flatten().fold(0.0f32, |m, &s| m.max(s));
+        for r in 0..4 {
+            let (x0, m0, x1) = out[r];
+            prop_assert_eq!(m0, mid);
+            prop_assert!(x0 <= ends[r].0 && x1 >= ends[r].2, "rib {}: {:?} -> {:?}", r, ends[r], out[r]);
+            let got = [(mid - x0) / spans[r][0], (x1 - mid) / spans[r][1]];
+            for side in 0..2 {
+                let (share, other) = (shares[r][side], shares[r][1 - side]);
+                let tol = 1e-4 * share.max(1.0);
+                if share < MIN_SIDE_SPAN {
+                    let (was, is) = if side == 0 { (ends[r].0, x0) } else { (ends[r].2, x1) };
+                    prop_assert_eq!(is, was);
+                    continue;
+                }
+                prop_assert!(got[side] >= COUNTERPART_SHARE * other - tol,
+                    "rib {} side {}: {} -> {}, other side {}", r, side, share, got[side], other);
+                prop_assert!(got[side] <= largest + tol,
+                    "rib {} side {}: {} -> {}, largest share {}", r, side, share, got[side], largest);
+            }
+        }
     }
 }
