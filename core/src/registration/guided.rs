@@ -556,8 +556,9 @@ pub const TIP_CANDIDATES: usize = 4;
 /// along its last segment. Of the cloud points within [`TIP_RADIUS_MM`] of that line
 /// and at most [`TIP_REACH_MM`] before or beyond the end, the outermost in x whose
 /// next-outermost lies within [`TIP_SUPPORT_SPACINGS`] of the rib's mean spacing is
-/// taken, and the rib reaches one spacing of the points behind it (their mean gap in x)
-/// beyond it: the outermost of points spread along a rib falls short of its tip by
+/// taken, and the rib reaches one spacing of the points behind it (their mean gap in x,
+/// over those reached from it in steps within that support) beyond it: the outermost of
+/// points spread along a rib falls short of its tip by
 /// about one spacing, and the spacing differs between a CT template, a sweep, a
 /// thinned tip and a sparse sweep.
 ///
@@ -645,14 +646,17 @@ impl Tips {
     fn reach(&self, r: usize, spacing: f32) -> [f32; 2] {
         let gap = TIP_SUPPORT_SPACINGS * spacing;
         let tip = |outer: &[f32; TIP_CANDIDATES]| {
-            // The outermost with support, and the innermost kept behind it.
+            // The outermost with support, and the innermost behind it that the points
+            // between reach in steps within the support: a wider step (from a lone pair
+            // beyond a hole back to the rest of the rib) is no spacing of the tip's
+            // points.
             let Some(i) = (0..TIP_CANDIDATES - 1).find(|&i| outer[i] - outer[i + 1] <= gap) else {
                 return f32::NEG_INFINITY;
             };
-            let j = (i + 1..TIP_CANDIDATES)
-                .rev()
-                .find(|&j| outer[j].is_finite())
-                .unwrap_or(i + 1);
+            let mut j = i + 1;
+            while j + 1 < TIP_CANDIDATES && outer[j] - outer[j + 1] <= gap {
+                j += 1;
+            }
             outer[i] + (outer[i] - outer[j]) / (j - i) as f32
         };
         let [(e0, _), (e1, _)] = self.ends[r];
@@ -1940,6 +1944,11 @@ mod tests {
         // next.
         points.push((0, on(2, 103.0), true));
         points.push((0, on(2, 105.5), true));
+        // Rib 3's right tip goes on to a pair 13 and 15 mm beyond the rest (two outliers
+        // in line, or a real tip beyond a hole): one spacing of the pair, 2 mm, beyond
+        // it, not the mean gap down to the rest (5.2 mm).
+        points.push((0, on(1, -93.0), true));
+        points.push((0, on(1, -95.0), true));
         let fitted = |tips: Option<&[Vec3; SKELETON_POINTS]>| {
             let mut fits = RibFits::new(&nodes, &labels, &Rigid::identity()).unwrap();
             if let Some(previous) = tips {
@@ -1972,6 +1981,7 @@ mod tests {
             let (lo, hi) = (second[offset].x, second[offset + n - 1].x);
             let reach = if r == 1 { 80.5 } else { 100.5 };
             let right = if r == 2 { 107.5 } else { reach };
+            let reach = if r == 1 { 97.0 } else { reach };
             assert!((lo + reach).abs() < 1e-3, "rib {}: {lo}", RIBS[r]);
             assert!((hi - right).abs() < 1e-3, "rib {}: {hi}", RIBS[r]);
             offset += n;
