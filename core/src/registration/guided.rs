@@ -1979,11 +1979,12 @@ mod tests {
             let (lo, hi) = (first[offset].x, first[offset + n - 1].x);
             assert!((lo + 80.0).abs() < 1e-3 && (hi - 80.0).abs() < 1e-3, "{r}");
             let (lo, hi) = (second[offset].x, second[offset + n - 1].x);
-            let reach = if r == 1 { 80.5 } else { 100.5 };
-            let right = if r == 2 { 107.5 } else { reach };
-            let reach = if r == 1 { 97.0 } else { reach };
-            assert!((lo + reach).abs() < 1e-3, "rib {}: {lo}", RIBS[r]);
-            assert!((hi - right).abs() < 1e-3, "rib {}: {hi}", RIBS[r]);
+            // Rib 3 reaches its lone pair at the low end and its nodes at the high end,
+            // rib 4's high end its two points past 105.5 mm.
+            let low = if r == 1 { 97.0 } else { 100.5 };
+            let high = [100.5, 80.5, 107.5, 100.5][r];
+            assert!((lo + low).abs() < 1e-3, "rib {}: {lo}", RIBS[r]);
+            assert!((hi - high).abs() < 1e-3, "rib {}: {hi}", RIBS[r]);
             offset += n;
         }
     }
