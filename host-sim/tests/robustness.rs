@@ -259,6 +259,22 @@ fn hard_sweep_registered_within_the_line(seed: u64, cases: &[Case]) {
     }
 }
 
+/// A sweep thinned to 30 % spaces each rib's points 1.5–4 mm apart, and the tip search,
+/// which lets a point 11 mean spacings past the next count as a rib's tip, took ribs on
+/// to lone outliers 15–30 mm beyond their cartilage: standard phantoms 71, 87, 103, 136,
+/// 192 and 197, thinned, were silent failures, a lateral waypoint 10.6–15.0 mm off. With
+/// the support at most `guided::TIP_SUPPORT_MAX_MM` each is within 6.5 mm (README "A
+/// lone point past a thinned rib").
+#[test]
+fn a_thinned_sweep_s_ribs_do_not_reach_for_an_outlier() {
+    for seed in [71, 87, 103, 136, 192, 197] {
+        let max = run(&Case::Sparse.apply(&pair(seed), seed))
+            .unwrap_or_else(|e| panic!("seed {seed}, thinned: refused: {e}"));
+        eprintln!("standard phantom {seed}, thinned: worst waypoint {max:.1} mm");
+        assert!(max < 7.0, "seed {seed}, thinned: {max:.1} mm");
+    }
+}
+
 /// The pose turns walk downhill: each starts from the best pose refined so far. Hard
 /// phantom 21, turned by any yaw or rotation, ended in a worse minimum than unturned
 /// (node residual 6.38 mm against 4.67) with a waypoint 10.4 mm off, accepted: a silent

@@ -547,6 +547,21 @@ pub const TIP_REACH_MM: f32 = 30.0;
 /// 2.10 / 8.8, 47, 2.82; 20: 1.32 / 7.7, 2.12 / 8.8, 49, 2.88. A fixed 5 mm: 1.21 /
 /// 5.8, 2.11 / 8.8, 54, 3.32 (the sparse sweeps' tips lose their support).
 pub const TIP_SUPPORT_SPACINGS: f32 = 11.0;
+/// Most that [`TIP_SUPPORT_SPACINGS`] spacings may come to, mm: a tip point lies within
+/// this of the next-outermost however sparse the sweep. On a sweep thinned to 30 %, a
+/// rib's mean spacing in x is 1.5–4 mm, so 11 spacings let a lone point 16–44 mm beyond
+/// the rest count as the tip, and the rib went on one spacing of the chain behind it
+/// beyond that: standard phantoms 71, 87, 103, 136, 192 and 197 and hard phantom 177,
+/// thinned, had a rib end taken 15–30 mm past the cartilage to an outlier (hard 177: rib
+/// 2 to x = 99.7 mm over a point 20 mm past the last, a waypoint 13.1 mm off). A dense
+/// sweep's 11 spacings (about 5 mm) stay below it, and so does a pair beyond a hole
+/// (each point within a spacing of the other). Measured with `ribreg eval --robustness
+/// --ours-only --pairs 100 --preset hard|standard [--first-seed 100]` (silent failures of
+/// the complete runs, seeds 0–199, standard / hard): without it 12 / 72; 8 mm 0 / 82
+/// (the thinned tips of hard phantoms 14, 42, 75 and 154 lose their support); 12 mm
+/// 0 / 73; 16 mm 4 / 74. The mean waypoint error of the complete runs accepted either
+/// way moves by 0.004 mm or less.
+pub const TIP_SUPPORT_MAX_MM: f32 = 12.0;
 /// Outermost points [`Tips`] keeps per rib end: the tip, enough behind it to find one
 /// with support ([`TIP_SUPPORT_SPACINGS`]) past two lone points, and the spacing of
 /// those behind it.
@@ -555,12 +570,12 @@ pub const TIP_CANDIDATES: usize = 4;
 /// The tip search of [`RibFits::with_tips`]. Each rib end of a previous skeleton goes on
 /// along its last segment. Of the cloud points within [`TIP_RADIUS_MM`] of that line
 /// and at most [`TIP_REACH_MM`] before or beyond the end, the outermost in x whose
-/// next-outermost lies within [`TIP_SUPPORT_SPACINGS`] of the rib's mean spacing is
-/// taken, and the rib reaches one spacing of the points behind it (their mean gap in x,
-/// over those reached from it in steps within that support) beyond it: the outermost of
-/// points spread along a rib falls short of its tip by
-/// about one spacing, and the spacing differs between a CT template, a sweep, a
-/// thinned tip and a sparse sweep.
+/// next-outermost lies within [`TIP_SUPPORT_SPACINGS`] of the rib's mean spacing (and
+/// [`TIP_SUPPORT_MAX_MM`]) is taken, and the rib reaches one spacing of the points behind
+/// it (their mean gap in x, over those reached from it in steps within that support)
+/// beyond it: the outermost of points spread along a rib falls short of its tip by about
+/// one spacing, and the spacing differs between a CT template, a sweep, a thinned tip
+/// and a sparse sweep.
 ///
 /// # Why
 /// A SOM node sits at the mean of the points nearest to it, so the outermost node of a
@@ -644,7 +659,7 @@ impl Tips {
     /// no point with support lies beyond it), for a rib whose points are `spacing` mm
     /// apart in x on average.
     fn reach(&self, r: usize, spacing: f32) -> [f32; 2] {
-        let gap = TIP_SUPPORT_SPACINGS * spacing;
+        let gap = (TIP_SUPPORT_SPACINGS * spacing).min(TIP_SUPPORT_MAX_MM);
         let tip = |outer: &[f32; TIP_CANDIDATES]| {
             // The outermost with support, and the innermost behind it that the points
             // between reach in steps within the support: a wider step (from a lone pair
@@ -1913,6 +1928,47 @@ mod tests {
         nodes.push(Vec3::new(0.0, -45.0, 0.0)).unwrap();
         labels.push(1).unwrap();
         (nodes, labels)
+    }
+
+    #[test]
+    fn a_lone_point_far_beyond_a_sparse_rib_is_not_its_tip() {
+        // Straight ribs with points 4 mm apart in x from -92 to 92 mm (a sweep thinned
+        // to 30 %), labelled within the nodes' ±80: 11 spacings come to about 43 mm.
+        let on = straight_rib;
+        let (nodes, labels) = straight_rib_nodes();
+        let mut points = std::vec::Vec::new();
+        for (r, &rib) in RIBS.iter().enumerate() {
+            for x in equal_steps(-92.0, 92.0, 47) {
+                points.push((if x.abs() <= 80.0 { rib } else { 0 }, on(r, x)));
+            }
+        }
+        // An outlier 16 mm past rib 2's left end (beyond TIP_SUPPORT_MAX_MM), and a point
+        // 10 mm past rib 4's right end (within it); both within TIP_REACH_MM of the
+        // nodes' ends.
+        points.push((0, on(0, 108.0)));
+        points.push((0, on(2, -102.0)));
+        let fitted = |tips: Option<&[Vec3; SKELETON_POINTS]>| {
+            let mut fits = RibFits::new(&nodes, &labels, &Rigid::identity()).unwrap();
+            if let Some(previous) = tips {
+                fits = fits.with_tips(previous);
+            }
+            for (label, p) in &points {
+                fits.add(*label, p);
+            }
+            fits.finish(Some(&[0.5; 4]), None, Cloud::Target).unwrap().0
+        };
+        let second = fitted(Some(&fitted(None)));
+        let mut offset = 0;
+        for (r, &n) in RIB_SAMPLES.iter().enumerate() {
+            let (lo, hi) = (second[offset].x, second[offset + n - 1].x);
+            // Every end one spacing of its three outermost supported points (4 mm)
+            // beyond the outermost: rib 2's left at 92 + 4 (the outlier would have
+            // taken it to 116), rib 4's right at 102 + 18 / 3.
+            let low = if r == 2 { 108.0 } else { 96.0 };
+            assert!((lo + low).abs() < 1e-3, "rib {}: {lo}", RIBS[r]);
+            assert!((hi - 96.0).abs() < 1e-3, "rib {}: {hi}", RIBS[r]);
+            offset += n;
+        }
     }
 
     #[test]
