@@ -1930,34 +1930,50 @@ mod tests {
         (nodes, labels)
     }
 
-    #[test]
-    fn a_lone_point_far_beyond_a_sparse_rib_is_not_its_tip() {
-        // Straight ribs with points 4 mm apart in x from -92 to 92 mm (a sweep thinned
-        // to 30 %), labelled within the nodes' ±80: 11 spacings come to about 43 mm.
-        let on = straight_rib;
+    /// The straight ribs' skeleton from `points` (label, point, whether the fits take it
+    /// or only the tip search sees it) without the tip search and then with it from the
+    /// first, each with its nodes' spans.
+    fn fitted_twice(points: &[(u8, Vec3, bool)]) -> [([Vec3; SKELETON_POINTS], [[f32; 2]; 4]); 2] {
         let (nodes, labels) = straight_rib_nodes();
-        let mut points = std::vec::Vec::new();
-        for (r, &rib) in RIBS.iter().enumerate() {
-            for x in equal_steps(-92.0, 92.0, 47) {
-                points.push((if x.abs() <= 80.0 { rib } else { 0 }, on(r, x)));
-            }
-        }
-        // An outlier 16 mm past rib 2's left end (beyond TIP_SUPPORT_MAX_MM), and a point
-        // 10 mm past rib 4's right end (within it); both within TIP_REACH_MM of the
-        // nodes' ends.
-        points.push((0, on(0, 108.0)));
-        points.push((0, on(2, -102.0)));
         let fitted = |tips: Option<&[Vec3; SKELETON_POINTS]>| {
             let mut fits = RibFits::new(&nodes, &labels, &Rigid::identity()).unwrap();
             if let Some(previous) = tips {
                 fits = fits.with_tips(previous);
             }
-            for (label, p) in &points {
-                fits.add(*label, p);
+            for (label, p, fitted) in points {
+                if *fitted {
+                    fits.add(*label, p);
+                } else {
+                    fits.see(p);
+                }
             }
-            fits.finish(Some(&[0.5; 4]), None, Cloud::Target).unwrap().0
+            let spans = fits.spans();
+            (
+                fits.finish(Some(&[0.5; 4]), None, Cloud::Target).unwrap().0,
+                spans,
+            )
         };
-        let second = fitted(Some(&fitted(None)));
+        let first = fitted(None);
+        [first, fitted(Some(&first.0))]
+    }
+
+    #[test]
+    fn a_lone_point_far_beyond_a_sparse_rib_is_not_its_tip() {
+        // Straight ribs with points 4 mm apart in x from -92 to 92 mm (a sweep thinned
+        // to 30 %), labelled within the nodes' ±80: 11 spacings come to about 43 mm.
+        let on = straight_rib;
+        let mut points = std::vec::Vec::new();
+        for (r, &rib) in RIBS.iter().enumerate() {
+            for x in equal_steps(-92.0, 92.0, 47) {
+                points.push((if x.abs() <= 80.0 { rib } else { 0 }, on(r, x), true));
+            }
+        }
+        // An outlier 16 mm past rib 2's left end (beyond TIP_SUPPORT_MAX_MM), and a point
+        // 10 mm past rib 4's right end (within it); both within TIP_REACH_MM of the
+        // nodes' ends.
+        points.push((0, on(0, 108.0), true));
+        points.push((0, on(2, -102.0), true));
+        let [_, (second, _)] = fitted_twice(&points);
         let mut offset = 0;
         for (r, &n) in RIB_SAMPLES.iter().enumerate() {
             let (lo, hi) = (second[offset].x, second[offset + n - 1].x);
@@ -1977,7 +1993,6 @@ mod tests {
         // sternum node at x = 0), its points 0.5 mm apart (those past the nodes
         // unlabelled, as a thin tip's are) as the cases below say.
         let on = straight_rib;
-        let (nodes, labels) = straight_rib_nodes();
         // (label, point, whether the fits take it or only the tip search sees it).
         let mut points = std::vec::Vec::new();
         for (r, &rib) in RIBS.iter().enumerate() {
@@ -2005,26 +2020,7 @@ mod tests {
         // it, not the mean gap down to the rest (5.2 mm).
         points.push((0, on(1, -93.0), true));
         points.push((0, on(1, -95.0), true));
-        let fitted = |tips: Option<&[Vec3; SKELETON_POINTS]>| {
-            let mut fits = RibFits::new(&nodes, &labels, &Rigid::identity()).unwrap();
-            if let Some(previous) = tips {
-                fits = fits.with_tips(previous);
-            }
-            for (label, p, fitted) in &points {
-                if *fitted {
-                    fits.add(*label, p);
-                } else {
-                    fits.see(p);
-                }
-            }
-            let spans = fits.spans();
-            (
-                fits.finish(Some(&[0.5; 4]), None, Cloud::Target).unwrap().0,
-                spans,
-            )
-        };
-        let (first, spans) = fitted(None);
-        let (second, spans_with_tips) = fitted(Some(&first));
+        let [(first, spans), (second, spans_with_tips)] = fitted_twice(&points);
         // The nodes' extents: the first pass, and the coverage evidence either way. With
         // the tips, each end goes one spacing beyond its outermost supported point: 0.5 mm
         // (rib 4's left end: its 4 outermost, 99.5 to 105.5 mm, are 2 mm apart).
