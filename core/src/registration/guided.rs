@@ -552,8 +552,9 @@ pub const TIP_SUPPORT_SPACINGS: f32 = 11.0;
 /// rib's mean spacing in x is 1.5–4 mm, so 11 spacings let a lone point 16–44 mm beyond
 /// the rest count as the tip, and the rib went on one spacing of the chain behind it
 /// beyond that: standard phantoms 71, 87, 103, 136, 192 and 197 and hard phantom 177,
-/// thinned, had a rib end taken 15–30 mm past the cartilage to an outlier (hard 177: rib
-/// 2 to x = 99.7 mm over a point 20 mm past the last, a waypoint 13.1 mm off). A dense
+/// thinned, had a rib end taken out to an outlier, 26–38 mm beyond where it ends with
+/// this bound (hard 177: rib 2 to x = 99.7 mm over a point 20 mm past the last, a
+/// waypoint 13.1 mm off; the other side of such a rib is lengthened toward it). A dense
 /// sweep's 11 spacings (about 5 mm) stay below it, and so does a pair beyond a hole
 /// (each point within a spacing of the other). Measured with `ribreg eval --robustness
 /// --ours-only --pairs 100 --preset hard|standard [--first-seed 100]` (silent failures of
