@@ -287,6 +287,20 @@ pub enum Error {
         /// Largest accepted, tenths of a mm.
         max_beyond_dmm: u16,
     },
+    /// A rib end the sweep shows lies at the edge of what the probe imaged (guided model
+    /// with the sweep's imaged area; see [`crate::registration::reach::check_edges`]):
+    /// the sweep may have stopped short of that cartilage, and the registration would
+    /// squeeze the template's rib onto what it shows.
+    SweepEdge {
+        /// The rib, 2..=5.
+        rib: u8,
+        /// The side.
+        side: Side,
+        /// How far beyond the rib's end the sweep imaged, tenths of a mm.
+        clearance_dmm: u16,
+        /// Least accepted, tenths of a mm.
+        min_dmm: u16,
+    },
 }
 
 impl fmt::Display for Cloud {
@@ -497,6 +511,23 @@ impl fmt::Display for Error {
                 f.write_str(
                     "; scan that cartilage out to its lateral end and register again, or map \
                      only the waypoints the sweep reaches (a partial plan)",
+                )
+            }
+            Error::SweepEdge {
+                rib,
+                side,
+                clearance_dmm,
+                min_dmm,
+            } => {
+                let mm = |d: u16| f32::from(d) / 10.0;
+                write!(
+                    f,
+                    "rib {rib} runs to the edge of the sweep on the patient's {side}: the probe \
+                     imaged {:.1} mm beyond the end the sweep shows (at least {:.1} mm is \
+                     needed), so the cartilage may go on; scan that side past the cartilages' \
+                     ends and register again, or map only the other side (a partial plan)",
+                    mm(clearance_dmm),
+                    mm(min_dmm)
                 )
             }
             Error::Unsupported {

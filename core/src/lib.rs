@@ -41,7 +41,8 @@
 //!   (README, "Performance and memory"; bounded by [`limits::MAX_WORKING_STATE`]).
 //! * [`acquisition`]: [`acquisition::probe`] spatial calibration (paper Eq. 1),
 //!   [`acquisition::temporal`] lag estimation, [`acquisition::track`] pose window with
-//!   lerp/slerp, [`acquisition::compound`] bounded voxel compounding.
+//!   lerp/slerp, [`acquisition::compound`] bounded voxel compounding,
+//!   [`acquisition::imaged`] the region the sweep's images passed over.
 //! * [`wire`]: the protocol both sides share, a leaf above the method's types.
 //! * [`controller`]: the host-testable state machine the firmware runs (upload, sweep,
 //!   registration in bounded steps, setpoints, pose watchdog).

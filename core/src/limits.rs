@@ -47,6 +47,11 @@ pub const PENDING_POINTS: usize = 2 * MAX_FRAME_PIXELS;
 /// at its deepest, from the firmware's frame sizes) fits beside the controller in
 /// 128 KiB of RAM.
 pub const CONTROLLER_VOXELS: usize = 3072;
+/// Lines of a sweep the compounding keeps to tell where it imaged
+/// (`acquisition::imaged`): a chest sweep at 10 mm line spacing has 20–30 (`ribreg hil`:
+/// the cartilages' 150–200 mm cranio-caudally plus an image's width); 64 × 48 B = 3 KiB
+/// of the controller's static RAM. Lines beyond are counted and count as not imaged.
+pub const IMAGED_LINES: usize = 64;
 /// Most bone pixels in one frame message (a 384-pixel image annotated every 4th column).
 pub const MAX_FRAME_PIXELS: usize = 96;
 /// Default transform cache capacity (power of two). 128 entries × (4 B key + 48 B

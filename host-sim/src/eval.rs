@@ -221,7 +221,7 @@ fn run_ours(pair: &PhantomPair, how: Options, labelled: bool) -> Result<Mapped, 
     let ms = t0.elapsed().as_secs_f64() * 1e3;
     // Only a partial mapping marks waypoints; any other judges them all.
     let supported = match how.partial {
-        true => crate::register::supported(&o.reach),
+        true => crate::register::supported(&o.reach, [false; 2]),
         false => vec![],
     };
     Ok((

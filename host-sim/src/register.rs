@@ -8,8 +8,11 @@
 
 use crate::io::prepared::TemplateFile;
 use crate::io::{self, Cloud, PlyFormat};
+use ribreg_core::acquisition::imaged::ImagedArea;
 use ribreg_core::config::{Config, RIBS, RIB_SAMPLES};
 use ribreg_core::error::Cloud as Which;
+use ribreg_core::error::Side as CoreSide;
+use ribreg_core::limits::IMAGED_LINES;
 use ribreg_core::registration::local_rigid::TransformCache;
 use ribreg_core::registration::metrics::{closest_distances, KdTree, Metrics};
 use ribreg_core::registration::pipeline::{register, Registration, Template};
@@ -196,6 +199,14 @@ pub struct RegisterJob {
     /// waypoint, and every check of the pose and the rib coverage.
     #[arg(long)]
     pub partial: bool,
+    /// Improved method: the lines of the sweep the target was compounded from
+    /// (`ribreg compound --imaged`), to check that the sweep imaged past every rib end it
+    /// shows: a rib end at the sweep's edge may be a cartilage the sweep stopped short
+    /// of, and the registration is refused (with `--partial`, that side's waypoints are
+    /// marked). The target must be in the sweep's frame (the robot base), as
+    /// `compound` writes it.
+    #[arg(long, value_name = "LINES.csv")]
+    pub imaged: Option<PathBuf>,
 }
 
 /// `X,Y,Z`: three finite numbers, not all zero.
@@ -383,6 +394,9 @@ pub struct Mapped {
     /// Without [`Options::partial`] every one is reached: the registration is refused
     /// otherwise.
     pub reach: Vec<Option<WaypointReach>>,
+    /// The sides (`[right, left]`) with a rib end at the sweep's edge
+    /// ([`Mapped::check_edges`]).
+    cut: [bool; 2],
     tpl: Box<Template>,
     reg: Box<Registration>,
     method: Method,
@@ -459,6 +473,7 @@ impl Mapped {
             registered,
             waypoints: mapped_wp,
             reach,
+            cut: [false; 2],
             tpl: Box::new(tpl),
             reg: Box::new(reg),
             method: how.method,
@@ -469,12 +484,36 @@ impl Mapped {
         })
     }
 
+    /// Checks every rib end the target shows against where the sweep imaged (`area`,
+    /// [`reach::edge_clearances`]): refused ([`reach::check_edges`]) when one lies at the
+    /// sweep's edge, unless `partial`, which marks that side's waypoints
+    /// ([`Mapped::supported`]) and is refused only when it keeps none. Returns the
+    /// clearances (NaN for a rib side not seen or the paper's method).
+    pub fn check_edges(
+        &mut self,
+        area: &ImagedArea<IMAGED_LINES>,
+        partial: bool,
+    ) -> Result<[[f32; 2]; 4], Error> {
+        let edges = reach::edge_clearances(&self.reg, |p, u, max| area.reach(p, u, max));
+        self.cut = reach::cut_sides(&edges);
+        if !partial || !self.supported().iter().any(|&k| k) {
+            reach::check_edges(&edges)?;
+        }
+        Ok(edges)
+    }
+
+    /// Per mapped waypoint, whether a partial plan keeps it ([`supported`]).
+    pub fn supported(&self) -> Vec<bool> {
+        supported(&self.reach, self.cut)
+    }
+
     /// ED / HD of the registered template against the target, and the report.
     pub fn measure(self, progress: &mut dyn FnMut(&str)) -> RegisterOutcome {
         let Mapped {
             registered,
             waypoints,
             reach,
+            cut,
             tpl,
             reg,
             method,
@@ -509,7 +548,7 @@ impl Mapped {
             },
             "coverage": coverage_json(&reg),
             "pose_hypotheses": confidence_json(&reg),
-            "waypoint_reach": reach_json(&reach),
+            "waypoint_reach": reach_json(&reach, cut),
             "metrics": {
                 "ed_mean_mm": metrics.ed.mean,
                 "ed_sd_mm": metrics.ed.sd,
@@ -573,23 +612,28 @@ fn skeleton_json(tpl: &Template, reg: &Registration) -> Value {
 }
 
 /// Per waypoint, whether a partial plan keeps it ([`WaypointReach::supported`]; `true`
-/// for a registration without rib extents).
-pub fn supported(reach: &[Option<WaypointReach>]) -> Vec<bool> {
+/// for a registration without rib extents), and not on a side whose rib ends lie at the
+/// sweep's edge (`cut`, [`reach::cut_sides`]; `[false; 2]` without the sweep's lines).
+pub fn supported(reach: &[Option<WaypointReach>], cut: [bool; 2]) -> Vec<bool> {
     reach
         .iter()
-        .map(|r| r.is_none_or(|r| r.supported(reach.iter().flatten())))
+        .map(|r| {
+            r.is_none_or(|r| {
+                r.supported(reach.iter().flatten()) && !cut[usize::from(r.side == CoreSide::Left)]
+            })
+        })
         .collect()
 }
 
 /// Guided model: per waypoint, the bounding rib and side it lies farthest beyond, by how
 /// much, and whether that is within the bound (`reach::MAX_BEYOND_MM`); `null` for the
 /// graph model or without waypoints.
-fn reach_json(reach: &[Option<WaypointReach>]) -> Value {
+fn reach_json(reach: &[Option<WaypointReach>], cut: [bool; 2]) -> Value {
     if reach.is_empty() || reach.iter().any(Option::is_none) {
         return Value::Null;
     }
     let rows: Vec<Value> = (reach.iter().flatten())
-        .zip(supported(reach))
+        .zip(supported(reach, cut))
         .map(|(r, supported)| {
             json!({
                 "ribs": r.ribs,
@@ -719,15 +763,16 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
     let t0 = Instant::now();
     // The target and the waypoints are read beside the template; the template's errors
     // come first, as they would one after the other.
-    let (template_file, target, planned) = std::thread::scope(|s| {
+    let (template_file, target, planned, imaged) = std::thread::scope(|s| {
         let others = s.spawn(|| {
             let target = io::read_cloud(&job.target);
             let planned = job.waypoints.as_deref().map(io::read_waypoints);
-            (target, planned)
+            let imaged = job.imaged.as_deref().map(crate::sweep::read_imaged);
+            (target, planned, imaged)
         });
         let template = read_template(&job.template);
-        let (target, planned) = joined(others);
-        (template, target, planned)
+        let (target, planned, imaged) = joined(others);
+        (template, target, planned, imaged)
     });
     let (template, prepared): (Cloud, Option<Template>) = match template_file? {
         TemplateFile::Cloud(c) => (c, None),
@@ -746,6 +791,7 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
     };
     let target: Cloud = target?;
     let planned = planned.transpose()?;
+    let imaged = imaged.transpose()?;
     let waypoints = planned.as_ref().map(|w| w.points.clone());
     let labels = to_core_labels(&job.template, &template.labels)?;
     let tpl = to_core(&template.points, Which::Template)?;
@@ -782,6 +828,11 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
         partial: job.partial,
         ..job.method.into()
     };
+    if job.method == Method::Paper && imaged.is_some() {
+        return Err(CliError::Usage(
+            "--imaged needs the improved method (the paper's finds no rib ends to check)".into(),
+        ));
+    }
     if job.method == Method::Paper && job.partial {
         return Err(CliError::Usage(
             "--partial needs the improved method (the paper's finds no rib extents to check \
@@ -826,6 +877,19 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
             )?
         }
     };
+    // Every rib end the target shows against where the sweep imaged: a partial plan
+    // leaves out the sides at the sweep's edge, and keeps something or is refused.
+    let mut mapped = mapped;
+    let edges = match &imaged {
+        Some(a) => Some(mapped.check_edges(a, job.partial)?),
+        None => None,
+    };
+    if let Some(e) = &edges {
+        progress(&format!(
+            "the sweep imaged {:.1} mm or more past every rib end it shows",
+            e.iter().flatten().fold(f32::INFINITY, |a, &b| a.min(b))
+        ));
+    }
     // The mapped points are written while the metrics are measured; the report, which
     // holds them, follows.
     let t1 = Instant::now();
@@ -844,7 +908,7 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
     )];
     if let (Some(path), Some(w)) = (&job.out_waypoints, &mapped.waypoints) {
         let supported = match job.partial {
-            true => supported(&mapped.reach),
+            true => mapped.supported(),
             false => vec![],
         };
         let waypoints = io::Waypoints {
@@ -864,8 +928,20 @@ pub fn run(job: &RegisterJob, progress: &mut dyn FnMut(&str)) -> Result<Register
         };
         outcome.report["files"] = json!({
             "template": job.template, "target": job.target, "waypoints": job.waypoints,
-            "out": job.out, "out_waypoints": job.out_waypoints,
+            "out": job.out, "out_waypoints": job.out_waypoints, "imaged": job.imaged,
         });
+        // Per rib (2..=5), `[right, left]`: how far past its end the sweep imaged.
+        outcome.report["sweep_edges"] = match edges {
+            Some(e) => {
+                let cut = reach::cut_sides(&e);
+                json!({
+                    "clearance_mm": e.map(|s| s.map(|v| v.is_finite().then_some(v))),
+                    "min_clearance_mm": reach::MIN_EDGE_CLEARANCE_MM,
+                    "cut": { "right": cut[0], "left": cut[1] },
+                })
+            }
+            None => Value::Null,
+        };
         outcome.report["timings_ms"]["read"] = json!(ms(t_read));
         outcome.report["timings_ms"]["total_before_write"] = json!(ms(t0.elapsed()));
         let text = serde_json::to_string_pretty(&outcome.report)

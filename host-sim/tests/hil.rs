@@ -227,29 +227,55 @@ fn a_waypoint_the_sweep_cannot_reach_refuses_the_plan_or_is_left_out_of_a_partia
     assert!(r.max_error() <= hil::TOLERANCE_MM, "{}", r.max_error());
 }
 
+/// The controller's refusal of standard phantom `seed` swept with lines `margin_mm` past
+/// the cartilages' lateral extent (negative: inside it).
+fn refusal(margin_mm: f64, seed: u64, partial: bool) -> String {
+    let mut options = RunOptions {
+        partial,
+        ..RunOptions::default()
+    };
+    options.sweep.margin_mm = margin_mm;
+    let phantom = PhantomConfig {
+        seed,
+        ..PhantomConfig::default()
+    };
+    hil::run_with(
+        &mut Session::new(InProcess::new()),
+        &phantom,
+        options,
+        &mut |_| {},
+    )
+    .unwrap_err()
+    .to_string()
+}
+
 /// A sweep whose lines stop 40 mm inside the cartilages' lateral extent on both sides
 /// (`ribreg hil --sweep-margin-mm -40`): the controller refuses to register it (fault
 /// code 26, a sweep cut short on both sides) and never drives the probe. On seeds 0–19
 /// it refuses 19 (the 20th lands 19.7 mm off: the README's limits).
 #[test]
 fn a_sweep_band_too_narrow_is_refused_by_the_controller() {
-    let mut options = RunOptions::default();
-    options.sweep.margin_mm = -40.0;
     for seed in [0, 1] {
-        let phantom = PhantomConfig {
-            seed,
-            ..PhantomConfig::default()
-        };
-        let e = hil::run_with(
-            &mut Session::new(InProcess::new()),
-            &phantom,
-            options.clone(),
-            &mut |_| {},
-        )
-        .unwrap_err()
-        .to_string();
+        let e = refusal(-40.0, seed, false);
         assert!(
             e.contains("cut short on both sides") && e.contains("code 26"),
+            "seed {seed}: {e}"
+        );
+    }
+}
+
+/// A sweep whose lines stop 20 mm inside the cartilages' lateral extent
+/// (`ribreg hil --sweep-margin-mm -20`) passed every check of the cloud: its ribs' shares
+/// of the template read like a complete sweep's, and the controller drove to waypoints
+/// 10–16 mm off on 13 of seeds 0–19. Where the probe's images passed tells: the ends of
+/// ribs 4 and 5 lie at the sweep's edge (`reach::check_edges`), and the controller
+/// refuses (fault code 27), a partial plan too (both sides are cut: nothing is kept).
+#[test]
+fn a_sweep_that_stops_at_the_cartilages_is_refused_by_the_controller() {
+    for (seed, partial) in [(0, false), (1, true)] {
+        let e = refusal(-20.0, seed, partial);
+        assert!(
+            e.contains("edge of the sweep") && e.contains("code 27"),
             "seed {seed}: {e}"
         );
     }

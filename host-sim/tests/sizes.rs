@@ -70,8 +70,9 @@ fn working_state_fits_64_kib() {
 #[test]
 fn sweep_state_fits_64_kib() {
     use ribreg_core::acquisition::compound::{Compounder, VoxelCloud};
+    use ribreg_core::acquisition::imaged::ImagedArea;
     use ribreg_core::acquisition::track::PoseTrack;
-    use ribreg_core::limits::CONTROLLER_VOXELS;
+    use ribreg_core::limits::{CONTROLLER_VOXELS, IMAGED_LINES};
     let rows = [
         (
             format!("PoseTrack<{TRACK_CAPACITY}> (1.28 s at 100 Hz)"),
@@ -86,7 +87,11 @@ fn sweep_state_fits_64_kib() {
             size_of::<VoxelCloud<CONTROLLER_VOXELS>>(),
         ),
         (
-            format!("Compounder<{TRACK_CAPACITY}, {VOXEL_CAPACITY}> (both + calibration)"),
+            format!("ImagedArea<{IMAGED_LINES}> (the sweep's lines)"),
+            size_of::<ImagedArea<IMAGED_LINES>>(),
+        ),
+        (
+            format!("Compounder<{TRACK_CAPACITY}, {VOXEL_CAPACITY}> (all + calibration)"),
             size_of::<Compounder<TRACK_CAPACITY, VOXEL_CAPACITY>>(),
         ),
     ];
@@ -98,4 +103,6 @@ fn sweep_state_fits_64_kib() {
     assert_eq!(per_voxel, 12, "bytes per voxel");
     const { assert!(CONTROLLER_VOXELS >= 2 * 1536) };
     assert!(size_of::<VoxelCloud<CONTROLLER_VOXELS>>() <= 36 * 1024 + 128);
+    // 48 B a line (limits::IMAGED_LINES).
+    assert!(size_of::<ImagedArea<IMAGED_LINES>>() <= IMAGED_LINES * 48 + 128);
 }

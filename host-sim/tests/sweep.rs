@@ -22,6 +22,21 @@ fn calibrate_cli(d: &Path, tracker: &str, video: &str) -> Output {
     ])
 }
 
+/// `ribreg compound` of the logs `phantom sweep` wrote to `d` into `d/us.ply`, with
+/// `extra` (the lag, at least): its stdout.
+fn compound(d: &Path, extra: &[&str]) -> String {
+    let files = ["poses.csv", "frames.csv", "probe.json", "us.ply"].map(|f| d.join(f));
+    let mut args = vec!["compound"];
+    for (flag, f) in ["--poses", "--frames", "--probe", "-o"]
+        .into_iter()
+        .zip(&files)
+    {
+        args.extend([flag, s(f)]);
+    }
+    args.extend_from_slice(extra);
+    stdout(&ribreg(&args))
+}
+
 /// Asserts exit 2 with one `ribreg: error:` line containing `needle`.
 fn assert_refused(o: &Output, needle: &str) {
     let err = String::from_utf8_lossy(&o.stderr);
@@ -107,19 +122,7 @@ fn sweep_logs_to_waypoints_through_the_cli() {
     io::write_text(&d.join("lag.json"), &json).unwrap();
 
     let us = d.join("us.ply");
-    let out = stdout(&ribreg(&[
-        "compound",
-        "--poses",
-        s(&d.join("poses.csv")),
-        "--frames",
-        s(&d.join("frames.csv")),
-        "--probe",
-        s(&d.join("probe.json")),
-        "--lag-file",
-        s(&d.join("lag.json")),
-        "-o",
-        s(&us),
-    ]));
+    let out = compound(d, &["--lag-file", s(&d.join("lag.json"))]);
     assert!(
         out.contains("refused 0 outside the tracked range, 0 invalid"),
         "{out}"
@@ -284,4 +287,79 @@ fn phantom_sweep_is_deterministic() {
     assert_eq!(a.poses, b.poses);
     assert_eq!(a.frames, b.frames);
     assert!(!a.frames.is_empty());
+}
+
+/// `phantom sweep --margin-mm M` → `compound --imaged` → `register --imaged`: a sweep
+/// whose lines stop 20 mm inside the cartilages' extent compounds into a cloud whose
+/// ribs read like a complete sweep's, and registers 10–16 mm off without the lines; with
+/// them it is refused, naming the rib end at the sweep's edge (a partial plan too: both
+/// sides are cut). The default sweep (lines 20 mm past the cartilages) is registered,
+/// and a lines file out of order is one clear error.
+#[test]
+fn a_sweep_that_stops_at_the_cartilages_is_refused_by_its_lines() {
+    let dir = tempfile::tempdir().unwrap();
+    let register = |d: &Path, extra: &[&str]| {
+        let files = [
+            "template.ply",
+            "us.ply",
+            "waypoints.csv",
+            "registered.ply",
+            "lines.csv",
+        ]
+        .map(|f| d.join(f));
+        let mut args = vec!["register"];
+        for (flag, f) in ["--template", "--target", "--waypoints", "--out", "--imaged"]
+            .into_iter()
+            .zip(&files)
+        {
+            args.extend([flag, s(f)]);
+        }
+        args.extend_from_slice(extra);
+        ribreg(&args)
+    };
+    for margin in ["20", "-20"] {
+        let d = dir.path().join(margin);
+        stdout(&ribreg(&[
+            "-q",
+            "phantom",
+            "sweep",
+            "--out-dir",
+            s(&d),
+            "--seed",
+            "1",
+            "--margin-mm",
+            margin,
+        ]));
+        let lines = d.join("lines.csv");
+        let out = compound(&d, &["--lag-ms", "268", "--imaged", s(&lines)]);
+        assert!(out.contains("19 sweep lines (0 not kept"), "{out}");
+        if margin == "20" {
+            stdout(&register(&d, &["--report", s(&d.join("report.json"))]));
+            let report: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(d.join("report.json")).unwrap())
+                    .unwrap();
+            let least = report["sweep_edges"]["clearance_mm"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .flat_map(|r| r.as_array().unwrap())
+                .map(|v| v.as_f64().unwrap())
+                .fold(f64::INFINITY, f64::min);
+            assert!(least > 10.0, "{report}");
+        } else {
+            for extra in [&[][..], &["--partial"][..]] {
+                assert_refused(&register(&d, extra), "runs to the edge of the sweep");
+            }
+        }
+    }
+    // Rows of a line out of order.
+    let d = dir.path().join("20");
+    let text = std::fs::read_to_string(d.join("lines.csv")).unwrap();
+    let mut rows: Vec<&str> = text.lines().collect();
+    rows.swap(1, 2);
+    std::fs::write(d.join("lines.csv"), rows.join("\n")).unwrap();
+    assert_refused(
+        &register(&d, &[]),
+        "row 1: expected line 0, end 0 then end 1",
+    );
 }

@@ -51,7 +51,7 @@ SCRIPT = "tests/golden/gen_wire.py"
 OUT = os.path.join("tests", "fixtures", "golden", "wire.json")
 
 MAGIC = int.from_bytes(b"RBRG", "little")  # 0x47524252
-VERSION = 4
+VERSION = 5
 
 # ---------------------------------------------------------------- primitives
 
@@ -186,7 +186,8 @@ COST_W = Struct(("registration_instructions", U64), ("registration_calls", U32),
                 ("serial_overruns", U32), ("serial_framing_errors", U32),
                 ("serial_dropped_bytes", U32))
 REGISTRATION_W = Struct(("hypotheses", U8), ("residual_mm", F32), ("runner_up_mm", F32),
-                        ("support_mm", F32), ("min_side_span_percent", U8), ("waypoints", U8))
+                        ("support_mm", F32), ("min_side_span_percent", U8),
+                        ("min_edge_clearance_mm", F32), ("waypoints", U8))
 FROM_CONTROLLER = Enum(
     "FromController",
     ("HelloAck", Struct(("magic", U32), ("version", U16), ("max_frame", U16))),
@@ -523,9 +524,10 @@ def cases():
                   "worst_receive_instructions": 0xFFFF_FFFF, "peak_stack_bytes": 0xFFFF_FFFF,
                   "serial_overruns": 0xFFFF_FFFF, "serial_framing_errors": 0xFFFF_FFFF,
                   "serial_dropped_bytes": 0xFFFF_FFFF}})
-    add("registration", "the registration's confidence before its waypoints (version 3)", fr, 0x4001,
+    add("registration", "the registration's confidence before its waypoints (version 5)", fr, 0x4001,
         {"Registration": {"hypotheses": 2, "residual_mm": f32(3.575), "runner_up_mm": f32(5.8),
-                          "support_mm": f32(4.25), "min_side_span_percent": 255, "waypoints": 10}})
+                          "support_mm": f32(4.25), "min_side_span_percent": 255,
+                          "min_edge_clearance_mm": f32(12.5), "waypoints": 10}})
 
     # COBS edges (found by search; the script asserts the property each is made for).
     add("cobs_tail_254", "payload ends in a run of exactly 254 non-zero bytes: a final 0xFF "

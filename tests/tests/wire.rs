@@ -659,15 +659,17 @@ fn from_controller() -> BoxedStrategy<FromController> {
             f32s(),
             f32s(),
             any::<u8>(),
+            f32s(),
             any::<u8>()
         )
-            .prop_map(|(h, r, u, s, c, w)| {
+            .prop_map(|(h, r, u, s, c, e, w)| {
                 FromController::Registration(RegistrationW {
                     hypotheses: h,
                     residual_mm: r,
                     runner_up_mm: u,
                     support_mm: s,
                     min_side_span_percent: c,
+                    min_edge_clearance_mm: e,
                     waypoints: w,
                 })
             }),
@@ -959,11 +961,11 @@ fn corrupted_frames_are_refused() {
 fn error_codes_have_summaries() {
     use ribreg_core::error::Side;
     use ribreg_core::Error;
-    for code in 1..=26 {
+    for code in 1..=27 {
         assert_ne!(wire::error_summary(code), "unknown error", "code {code}");
     }
     assert_eq!(wire::error_summary(0), "unknown error");
-    assert_eq!(wire::error_summary(27), "unknown error");
+    assert_eq!(wire::error_summary(28), "unknown error");
     let not_seen = Error::NotSeen {
         rib: 5,
         side: Side::Right,
@@ -1004,6 +1006,21 @@ fn error_codes_have_summaries() {
     assert!(narrow
         .to_string()
         .contains("68 % of the template's on average"));
+    let edge = Error::SweepEdge {
+        rib: 5,
+        side: Side::Right,
+        clearance_dmm: 12,
+        min_dmm: 30,
+    };
+    assert_eq!(wire::error_code(&edge), 27);
+    assert!(wire::error_summary(27).contains("edge of the sweep"));
+    assert_eq!(
+        edge.to_string(),
+        "rib 5 runs to the edge of the sweep on the patient's right (−x): the probe imaged \
+         1.2 mm beyond the end the sweep shows (at least 3.0 mm is needed), so the cartilage \
+         may go on; scan that side past the cartilages' ends and register again, or map only \
+         the other side (a partial plan)"
+    );
     let fault = wire::Fault::Registration(wire::error_code(&not_seen));
     assert_eq!(
         fault.to_string(),

@@ -31,10 +31,11 @@
 //! millimetres). A coarsening adds a quarter unit per voxel and a weighted merge half a
 //! unit.
 
+use crate::acquisition::imaged::ImagedArea;
 use crate::acquisition::probe::Calibration;
 use crate::acquisition::track::{PoseTrack, TrackedPose};
 use crate::error::{Cloud, Error, Result, Stream};
-use crate::limits::PENDING_POINTS;
+use crate::limits::{IMAGED_LINES, PENDING_POINTS};
 use crate::math::geom::Rigid;
 use crate::Vec3;
 
@@ -418,6 +419,8 @@ pub struct Compounder<const POSES: usize, const VOXELS: usize> {
     pub cloud: VoxelCloud<VOXELS>,
     /// Frame counters.
     pub frames: FrameStats,
+    /// Where the tracked poses' images passed ([`Compounder::add_pose`]).
+    pub imaged: ImagedArea<IMAGED_LINES>,
 }
 
 impl<const POSES: usize, const VOXELS: usize> Compounder<POSES, VOXELS> {
@@ -467,6 +470,7 @@ impl<const POSES: usize, const VOXELS: usize> Compounder<POSES, VOXELS> {
                 outside_track: 0,
                 invalid: 0,
             },
+            imaged: ImagedArea::new(),
         }
     }
 
@@ -489,6 +493,7 @@ impl<const POSES: usize, const VOXELS: usize> Compounder<POSES, VOXELS> {
         self.lag_s = lag_s;
         self.track.clear();
         self.frames = FrameStats::default();
+        self.imaged.clear();
         self.pending.clear();
         self.closed = false;
         Ok(())
@@ -533,9 +538,13 @@ impl<const POSES: usize, const VOXELS: usize> Compounder<POSES, VOXELS> {
         self.lag_s
     }
 
-    /// Adds a tracked flange pose (see [`PoseTrack::push`]).
+    /// Adds a tracked flange pose (see [`PoseTrack::push`]) and marks its image in
+    /// [`Compounder::imaged`].
     pub fn add_pose(&mut self, pose: TrackedPose) -> Result<()> {
-        self.track.push(pose)
+        self.track.push(pose)?;
+        let b_t_us = pose.to_rigid().after(&self.ee_t_us);
+        self.imaged.place(&b_t_us, &self.calibration.probe);
+        Ok(())
     }
 
     /// Adds a frame stamped `t` (video clock) with its bone pixels `(u, v)` to the cloud

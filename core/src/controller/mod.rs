@@ -66,6 +66,7 @@ use crate::limits::{MIN_CLOUD_POINTS, OUTBOX, SKELETON_POINTS, SOM1_CAPACITY, TR
 use crate::math::geom::Rigid;
 use crate::registration::local_rigid::{Lookup, TransformCache};
 use crate::registration::pipeline::{Registering, Registration, Template};
+use crate::registration::reach::{check_edges, cut_sides, edge_clearances};
 
 use crate::acquisition::track::TrackedPose;
 use crate::wire::{
@@ -143,6 +144,9 @@ pub struct Controller<const VOXELS: usize> {
     targets: heapless::Vec<ProbeTarget, MAX_WAYPOINTS>,
     /// The last registration's confidence, sent with its result.
     confidence: Option<RegistrationW>,
+    /// The last registration's rib ends against the sweep's imaged area
+    /// ([`edge_clearances`]), once checked.
+    edges: Option<[[f32; 2]; 4]>,
     /// The next waypoint's transform being found (bounded steps), then found.
     lookup: Option<Lookup>,
     mapped: Option<(Rigid, u32)>,
@@ -188,6 +192,7 @@ impl<const VOXELS: usize> Controller<VOXELS> {
             registering: None,
             targets: heapless::Vec::new(),
             confidence: None,
+            edges: None,
             lookup: None,
             mapped: None,
             waypoint_cache: TransformCache::new(),
@@ -564,6 +569,7 @@ impl<const VOXELS: usize> Controller<VOXELS> {
             } else if self.sweep.cloud.finish_some(0) {
                 self.targets.clear();
                 self.confidence = None;
+                self.edges = None;
                 self.start_registration(&cfg);
             } else {
                 self.sweep.cloud.finish_some(VOXELS_FINISHED_PER_POLL);
@@ -578,8 +584,21 @@ impl<const VOXELS: usize> Controller<VOXELS> {
         let finished_before = r.registration().is_some();
         let outcome = match r.step(template, cloud, &cfg, SOM_ITERATIONS_PER_POLL) {
             Ok(false) => return,
-            // The registration's last step is a call of its own.
+            // The registration's last step is a call of its own, and so is the check of
+            // its rib ends against where the sweep imaged: a partial plan drives to
+            // neither side with a rib end at the sweep's edge.
             Ok(true) if !finished_before => return,
+            Ok(true) if self.edges.is_none() => {
+                let Some(reg) = r.registration() else { return };
+                let area = &self.sweep.imaged;
+                let edges = edge_clearances(reg, |p, u, max| area.reach(p, u, max));
+                self.edges = Some(edges);
+                let partial = self.settings.as_ref().is_some_and(|s| s.partial);
+                match check_edges(&edges) {
+                    Err(e) if !partial => Err(e),
+                    _ => return,
+                }
+            }
             // Then each waypoint in calls of its own: its transform (widening, fit),
             // then its probe pose.
             Ok(true) => match (r.registration(), self.waypoints.get(self.targets.len())) {
@@ -620,7 +639,7 @@ impl<const VOXELS: usize> Controller<VOXELS> {
                         // Note: a push cannot fail, waypoints and targets share MAX_WAYPOINTS.
                         match t.map(|t| self.targets.push(t)) {
                             Ok(_) if self.targets.len() < self.waypoints.len() => return,
-                            Ok(_) => mark_supported(&mut self.targets),
+                            Ok(_) => mark_supported(&mut self.targets, self.edges),
                             Err(e) => Err(e),
                         }
                     }
@@ -632,7 +651,7 @@ impl<const VOXELS: usize> Controller<VOXELS> {
         };
         if outcome.is_ok() {
             if let Some(reg) = r.registration() {
-                self.confidence = Some(confidence(reg, self.targets.len()));
+                self.confidence = Some(confidence(reg, self.edges, self.targets.len()));
             }
         }
         self.registering = None;
@@ -675,23 +694,32 @@ impl<const VOXELS: usize> Controller<VOXELS> {
 }
 
 /// Marks the targets of a partial plan that are not driven to
-/// ([`crate::registration::reach::WaypointReach::supported`]); a plan that keeps none is
-/// refused ([`crate::registration::reach::check_plan`]). (Without a partial plan every
-/// target is reached already: an unreached one refused the plan as it was mapped.)
-fn mark_supported(targets: &mut [ProbeTarget]) -> Result<()> {
+/// ([`crate::registration::reach::WaypointReach::supported`], and every target on a side
+/// with a rib end at the sweep's edge, [`cut_sides`] of `edges`); a plan that keeps none
+/// is refused ([`crate::registration::reach::check_plan`], or the edge's
+/// [`Error::SweepEdge`]). (Without a partial plan every target is reached already: an
+/// unreached one, or a rib end at the edge, refused the plan before.)
+fn mark_supported(targets: &mut [ProbeTarget], edges: Option<[[f32; 2]; 4]>) -> Result<()> {
+    let cut = edges.map_or([false; 2], |e| cut_sides(&e));
     let mut keep = [true; MAX_WAYPOINTS];
     for (k, t) in keep.iter_mut().zip(targets.iter()) {
         let plan = targets.iter().filter_map(|t| t.reach.as_ref());
-        *k = t.reach.is_none_or(|r| r.supported(plan));
+        *k = t.reach.is_none_or(|r| {
+            r.supported(plan) && !cut[usize::from(r.side == crate::error::Side::Left)]
+        });
     }
     for (t, k) in targets.iter_mut().zip(keep) {
         t.supported = k;
     }
-    crate::registration::reach::check_plan(targets.iter().map(|t| t.reach.as_ref()), true)
+    crate::registration::reach::check_plan(targets.iter().map(|t| t.reach.as_ref()), true)?;
+    match edges {
+        Some(e) if !targets.iter().any(|t| t.supported) => check_edges(&e),
+        _ => Ok(()),
+    }
 }
 
 /// The wire summary of how clearly `reg` found the patient.
-fn confidence(reg: &Registration, waypoints: usize) -> RegistrationW {
+fn confidence(reg: &Registration, edges: Option<[[f32; 2]; 4]>, waypoints: usize) -> RegistrationW {
     let spans = reg.coverage.unwrap_or([[f32::NAN; 2]; 4]);
     // NaN (no evidence, or the graph model) counts as 0 %.
     let least = spans.iter().flatten().fold(
@@ -706,6 +734,12 @@ fn confidence(reg: &Registration, waypoints: usize) -> RegistrationW {
         support_mm: c.map_or(f32::NAN, |c| c.support_mm),
         // `as` saturates: 0..=255 %.
         min_side_span_percent: (least * 100.0 + 0.5) as u8,
+        // NaN (a rib side not seen) is left out; none measured is NaN.
+        min_edge_clearance_mm: edges
+            .iter()
+            .flatten()
+            .flatten()
+            .fold(f32::NAN, |a, &b| a.min(b)),
         waypoints: waypoints as u8,
     }
 }

@@ -148,6 +148,110 @@ where
     Ok(())
 }
 
+/// Least distance the sweep must have imaged beyond each rib end it shows, mm
+/// ([`check_edges`]). A cartilage that ends was imaged past its end — empty tissue — a
+/// cartilage the sweep stopped short of was not: its points end where the probe
+/// turned back.
+pub const MIN_EDGE_CLEARANCE_MM: f32 = 3.0;
+/// Farthest [`edge_clearances`] looks beyond a rib end, mm.
+pub const EDGE_LOOK_MM: f32 = 20.0;
+
+/// Per rib (2..=5) and side (`[right, left]`), the end of the rib the sweep shows
+/// ([`Registration::reach`], before any short rib is lengthened) as a point of the
+/// target frame, and the direction on out along the rib there: the target skeleton's
+/// polyline of that rib, in the fitting frame, at the end's x (extended along its last
+/// segment beyond the polyline). `None` for a rib not seen, the graph model, or a
+/// skeleton not finite.
+pub fn rib_ends(registration: &Registration) -> [[Option<(Vec3, Vec3)>; 2]; 4] {
+    let mut out = [[None; 2]; 4];
+    let Some(reach) = registration.reach else {
+        return out;
+    };
+    let to_target = registration.pose.inverse();
+    let mut offset = 0;
+    for (r, &n) in RIB_SAMPLES.iter().enumerate() {
+        let rib = &registration.skeleton.points[offset..offset + n];
+        offset += n;
+        let (x0, _, x1) = reach[r];
+        // A rib not seen: no end (NaN compares false).
+        if x0.is_nan() || x1.is_nan() || x0 > x1 {
+            continue;
+        }
+        for (side, (x, outward)) in [(x0, -1.0f32), (x1, 1.0)].into_iter().enumerate() {
+            // The segment whose x range lies nearest the end's x, end first.
+            let mut best: Option<(f32, Vec3, Vec3)> = None;
+            for s in rib.windows(2) {
+                let (a, b) = (
+                    registration.pose.apply(&s[0]),
+                    registration.pose.apply(&s[1]),
+                );
+                let (lo, hi) = (a.x.min(b.x), a.x.max(b.x));
+                let gap = (lo - x).max(x - hi).max(0.0);
+                if best.is_none_or(|(g, _, _)| gap < g) {
+                    best = Some((gap, a, b));
+                }
+            }
+            let Some((_, a, b)) = best else { continue };
+            let d = b - a;
+            if d.x.is_nan() || d.x.abs() <= 1e-3 {
+                continue;
+            }
+            let at = a + d * ((x - a.x) / d.x);
+            let dir = if d.x * outward >= 0.0 { d } else { -d };
+            let (p, u) = (to_target.apply(&at), to_target.rotation * dir);
+            if p.iter().chain(u.iter()).all(|v| v.is_finite()) {
+                out[r][side] = Some((p, u));
+            }
+        }
+    }
+    out
+}
+
+/// Per rib (2..=5) and side (`[right, left]`), how far beyond the rib's end
+/// ([`rib_ends`]) the sweep imaged without a break, mm, up to [`EDGE_LOOK_MM`]:
+/// `reach(from, direction, max)` is the imaged region's
+/// ([`crate::acquisition::imaged::ImagedArea::reach`], target frame = robot base). NaN
+/// where [`rib_ends`] gives none.
+pub fn edge_clearances(
+    registration: &Registration,
+    reach: impl Fn(&Vec3, &Vec3, f32) -> f32,
+) -> [[f32; 2]; 4] {
+    rib_ends(registration)
+        .map(|sides| sides.map(|end| end.map_or(f32::NAN, |(p, u)| reach(&p, &u, EDGE_LOOK_MM))))
+}
+
+/// Refuses a registration a rib end of which lies at the edge of what the sweep
+/// imaged ([`edge_clearances`] below [`MIN_EDGE_CLEARANCE_MM`]): [`Error::SweepEdge`]
+/// for the least. The sweep may have stopped short of that cartilage, and the
+/// registration would squeeze the template's rib onto what it shows, pulling that
+/// side's waypoints toward the sternum. NaN clearances (a rib side not seen) are left
+/// to the coverage checks.
+pub fn check_edges(clearances: &[[f32; 2]; 4]) -> Result<()> {
+    let mut least: Option<(usize, usize, f32)> = None;
+    for (r, sides) in clearances.iter().enumerate() {
+        for (s, &c) in sides.iter().enumerate() {
+            if c < MIN_EDGE_CLEARANCE_MM && least.is_none_or(|(_, _, l)| c < l) {
+                least = Some((r, s, c));
+            }
+        }
+    }
+    match least {
+        None => Ok(()),
+        Some((r, s, c)) => Err(Error::SweepEdge {
+            rib: RIBS[r],
+            side: if s == 0 { Side::Right } else { Side::Left },
+            clearance_dmm: tenths(c),
+            min_dmm: tenths(MIN_EDGE_CLEARANCE_MM),
+        }),
+    }
+}
+
+/// The sides (`[right, left]`) with a rib end below [`MIN_EDGE_CLEARANCE_MM`]: a partial
+/// plan drives to no waypoint there.
+pub fn cut_sides(clearances: &[[f32; 2]; 4]) -> [bool; 2] {
+    core::array::from_fn(|s| clearances.iter().any(|c| c[s] < MIN_EDGE_CLEARANCE_MM))
+}
+
 /// The two ribs (indices into [`RIBS`]) whose skeleton polylines (`skeleton`, the 30
 /// points rib by rib, [`RIB_SAMPLES`] each) pass nearest `p`, nearest first: the
 /// cartilages bounding the gap a waypoint at `p` lies in.
@@ -275,6 +379,40 @@ mod tests {
         let e = check_plan(none_kept.iter().copied(), true).unwrap_err();
         assert!(matches!(e, Error::NotReached { waypoint: 1, .. }), "{e:?}");
         assert_eq!(check_plan([None, Some(&right)].into_iter(), false), Ok(()));
+    }
+
+    /// A rib end the sweep imaged less than [`MIN_EDGE_CLEARANCE_MM`] past refuses the
+    /// registration (the least names it) and, in a partial plan, its side; a rib side
+    /// not seen (NaN) is the coverage checks' to refuse.
+    #[test]
+    fn a_rib_end_at_the_sweep_s_edge_refuses_its_side() {
+        let mut c = [[20.0f32; 2]; 4];
+        c[1][0] = f32::NAN;
+        assert_eq!(check_edges(&c), Ok(()));
+        assert_eq!(cut_sides(&c), [false, false]);
+        c[3][1] = 2.9;
+        c[2][1] = 0.3;
+        assert_eq!(
+            check_edges(&c),
+            Err(Error::SweepEdge {
+                rib: 4,
+                side: Side::Left,
+                clearance_dmm: 3,
+                min_dmm: 30,
+            })
+        );
+        assert_eq!(cut_sides(&c), [false, true]);
+        c[0][0] = 0.0;
+        assert_eq!(cut_sides(&c), [true, true]);
+        assert!(matches!(
+            check_edges(&c),
+            Err(Error::SweepEdge {
+                rib: 2,
+                side: Side::Right,
+                clearance_dmm: 0,
+                ..
+            })
+        ));
     }
 
     #[test]

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 /// Protocol magic, ASCII "RBRG" read as a little-endian `u32`.
 pub const MAGIC: u32 = u32::from_le_bytes(*b"RBRG");
 /// Protocol version; bumped on any change of a message's encoding.
-pub const VERSION: u16 = 4;
+pub const VERSION: u16 = 5;
 
 /// Pixels travel as `u16` in 1/16 pixel: up to 4095.94 px at 0.0625 px resolution.
 pub const PIXEL_SUBDIVISIONS: f32 = 16.0;
@@ -303,10 +303,15 @@ pub struct RegistrationW {
     pub support_mm: f32,
     /// The target's smallest rib-side span, percent of the template's (saturating).
     pub min_side_span_percent: u8,
+    /// How far beyond its nearest rib end the sweep imaged, mm
+    /// ([`crate::registration::reach::edge_clearances`], at most
+    /// [`crate::registration::reach::EDGE_LOOK_MM`]; NaN when not measured). (Added in
+    /// version 5.)
+    pub min_edge_clearance_mm: f32,
     /// Waypoints mapped (the [`FromController::Waypoint`] messages that follow).
     pub waypoints: u8,
 }
-const REGISTRATION_W: usize = 3 * U8 + 3 * F32;
+const REGISTRATION_W: usize = 3 * U8 + 4 * F32;
 
 /// A probe setpoint: TCP pose in the robot base frame.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -450,6 +455,10 @@ pub fn error_summary(code: u8) -> &'static str {
             "the sweep looks cut short on both sides (scan both sides out to the \
                cartilages' ends and register again)"
         }
+        27 => {
+            "a rib runs to the edge of the sweep (scan that side past the cartilages' ends \
+               and register again, or configure a partial plan)"
+        }
         _ => "unknown error",
     }
 }
@@ -497,5 +506,6 @@ pub fn error_code(e: &crate::error::Error) -> u8 {
         E::NotReached { .. } => 24,
         E::SideShort { .. } => 25,
         E::SweepShort { .. } => 26,
+        E::SweepEdge { .. } => 27,
     }
 }

@@ -477,7 +477,7 @@ fn register(
     let mapped = outcome.waypoints.as_deref().map(|w| {
         // Only a partial plan marks waypoints: every other one was checked in full.
         let marks = if partial {
-            supported(&outcome.reach)
+            supported(&outcome.reach, [false; 2])
         } else {
             vec![true; w.len()]
         };

@@ -57,6 +57,11 @@ pub struct Args {
     /// Output cloud (PLY, binary little-endian), robot base frame.
     #[arg(short, long)]
     out: PathBuf,
+    /// Also write the sweep's lines (CSV, `sweep::IMAGED_COLUMNS`): where its images
+    /// passed, for `register --imaged` to check that the sweep imaged past every rib
+    /// end it shows.
+    #[arg(long, value_name = "LINES.csv")]
+    imaged: Option<PathBuf>,
 }
 
 pub fn run(args: &Args, ctx: &Context) -> Result<(), CliError> {
@@ -115,6 +120,16 @@ pub fn run(args: &Args, ctx: &Context) -> Result<(), CliError> {
         )));
     }
     sweep::write_cloud(&args.out, &o.points)?;
+    if let Some(path) = &args.imaged {
+        sweep::write_imaged(path, &o.imaged)?;
+        println!(
+            "wrote {}: {} sweep lines ({} not kept: more than {})",
+            path.display(),
+            o.imaged.line_count(),
+            o.imaged.dropped,
+            ribreg_core::limits::IMAGED_LINES
+        );
+    }
     println!(
         "wrote {}: {} points ({} mm voxels); frames placed {}, refused {} outside the tracked \
          range, {} invalid; points accepted {} (merged {}), refused {} (cloud full); poses refused {}",

@@ -42,7 +42,7 @@ pub struct Args {
     #[arg(long)]
     partial: bool,
     /// How far each line of the simulated sweep runs past the cartilages' lateral
-    /// extent, mm (default 10); negative, the lines stop that far inside it: a sweep
+    /// extent, mm (default 20); negative, the lines stop that far inside it: a sweep
     /// band too narrow, which the controller should refuse (down to -60).
     #[arg(long, value_name = "MM", allow_negative_numbers = true)]
     sweep_margin_mm: Option<f64>,

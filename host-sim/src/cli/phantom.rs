@@ -56,9 +56,11 @@ struct SweepArgs {
     /// Fraction of frames lost.
     #[arg(long, default_value_t = 0.05)]
     miss_rate: f64,
-    /// How far each line runs past the cartilages' lateral extent, mm; negative, the
-    /// lines stop that far inside it (a sweep band too narrow; down to -60).
-    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
+    /// How far each line runs past the cartilages' lateral extent, mm (the default 20:
+    /// on a curved chest the image at the cartilage's depth reaches about 10 mm less
+    /// than the probe on the skin); negative, the lines stop that far inside it (a sweep
+    /// band too narrow; down to -60).
+    #[arg(long, default_value_t = 20.0, allow_negative_numbers = true)]
     margin_mm: f64,
 }
 

@@ -397,13 +397,15 @@ pub fn run_with<P: Port>(
     match confidence {
         Some(c) => progress(&format!(
             "registered: {} waypoints mapped; pose residual {:.2} mm (runner-up {:.2} mm, {} \
-             hypotheses), template support {:.2} mm, least rib-side coverage {} %",
+             hypotheses), template support {:.2} mm, least rib-side coverage {} %, imaged \
+             {:.1} mm past the nearest rib end",
             mapped.len(),
             c.residual_mm,
             c.runner_up_mm,
             c.hypotheses,
             c.support_mm,
-            c.min_side_span_percent
+            c.min_side_span_percent,
+            c.min_edge_clearance_mm
         )),
         None => progress(&format!("registered: {} waypoints mapped", mapped.len())),
     }

@@ -391,6 +391,8 @@ class Registration(Message):
     runner_up_mm: float  #: Residual of the best distinct hypothesis, mm (inf if none).
     support_mm: float  #: How closely the sweep supports the whole template, mm.
     min_side_span_percent: int  #: Least rib-side span, percent of the template's.
+    #: How far beyond its nearest rib end the sweep imaged, mm (nan: not measured).
+    min_edge_clearance_mm: float
     waypoints: int  #: Waypoints mapped (the :class:`Waypoint` messages that follow).
 
 
