@@ -59,6 +59,10 @@ def main() -> None:
     add("text_clouds", "points.csv", b"\x02" + (ph / "true_waypoints.csv").read_bytes())
     for f in ("o3d.xyz", "o3d.xyzn", "o3d.xyzrgb"):
         add("text_clouds", f, b"\x03" + (clouds / f).read_bytes())
+    # A sweep's imaged lines (`compound --imaged`): one line, both ends.
+    add("text_clouds", "lines.csv", b"\x04line,end,x,y,z,across_x,across_y,across_z,"
+        b"normal_x,normal_y,normal_z,width_mm\n0,0,0,0,0,0,1,0,1,0,0,38.4\n"
+        b"0,1,100,0,0,0,1,0,1,0,0,38.4\n")
 
     # Markups: tag 0 = .mrk.json, 1 = .fcsv.
     for f in ("slicer_lps.mrk.json", "slicer_ras.mrk.json"):
