@@ -358,32 +358,46 @@ impl<const LINES: usize> ImagedArea<LINES> {
             return f32::NAN;
         }
         let u = direction / n;
-        // Each line's span along the ray; then the union's run from 0 (each pass takes
-        // every span that starts within the run: at most one pass per line).
+        // Each line's span along the ray (empty ones left out), sorted by where it
+        // starts (insertion sort: at most LINES²/2 moves, no allocation); then one pass
+        // joins those that start within the run so far.
         let mut spans = [(0.0f32, 0.0f32); LINES];
         let mut count = 0;
-        for (slot, line) in spans.iter_mut().zip(self.lines.iter()) {
-            *slot = line.span(from, &u, self.half_width);
-            count += 1;
-        }
         let open = self.open.map(|l| l.span(from, &u, self.half_width));
-        let all = || spans[..count].iter().chain(open.iter());
-        const TOUCH: f32 = 1e-3;
-        if !all().any(|&(lo, hi)| lo <= TOUCH && 0.0 <= hi) {
-            return 0.0;
+        for (lo, hi) in self
+            .lines
+            .iter()
+            .map(|l| l.span(from, &u, self.half_width))
+            .chain(open)
+        {
+            // NaN fails `lo <= hi`. With LINES lines kept, the one being swept is left
+            // out (not imaged, as lines beyond LINES are).
+            if lo <= hi && count < LINES {
+                let mut k = count;
+                while k > 0 && spans[k - 1].0 > lo {
+                    spans[k] = spans[k - 1];
+                    k -= 1;
+                }
+                spans[k] = (lo, hi);
+                count += 1;
+            }
         }
-        let mut run = 0.0f32;
-        loop {
-            let further = all()
-                .filter(|&&(lo, hi)| lo <= run + TOUCH && hi > run)
-                .fold(run, |r, &(_, hi)| r.max(hi));
-            // NaN spans never extend the run.
-            if further <= run || further.is_nan() || run >= max_mm {
+        const TOUCH: f32 = 1e-3;
+        let (mut run, mut covered) = (0.0f32, false);
+        for &(lo, hi) in &spans[..count] {
+            if lo > run + TOUCH {
                 break;
             }
-            run = further;
+            if hi >= 0.0 {
+                covered = true;
+                run = run.max(hi);
+            }
         }
-        run.min(max_mm)
+        if covered {
+            run.min(max_mm)
+        } else {
+            0.0
+        }
     }
 
     fn all_lines(&self) -> impl Iterator<Item = &Line> {
@@ -494,6 +508,27 @@ mod tests {
         assert!(area
             .reach(&Vec3::new(f32::NAN, 0.0, 0.0), &lateral, 20.0)
             .is_nan());
+    }
+
+    /// Lines that overlap end to end, given in any order, join into one run; a gap
+    /// between two stops it.
+    #[test]
+    fn overlapping_lines_join_and_a_gap_stops_the_run() {
+        let x = Vec3::new(1.0, 0.0, 0.0);
+        let end = |cx: f32| LineEnd {
+            centre: Vec3::new(cx, 0.0, -17.5),
+            across: Vec3::new(0.0, 1.0, 0.0),
+            normal: x,
+        };
+        let mut area = ImagedArea::<IMAGED_LINES>::new();
+        for (a, b) in [(55.0, 90.0), (0.0, 30.0), (25.0, 60.0), (95.0, 120.0)] {
+            area.push_line([end(a), end(b)], 38.4).unwrap();
+        }
+        let from = Vec3::new(10.0, 5.0, -20.0);
+        assert_eq!(area.reach(&from, &x, 200.0), 80.0);
+        assert_eq!(area.reach(&from, &x, 50.0), 50.0);
+        assert_eq!(area.reach(&from, &-x, 200.0), 10.0);
+        assert_eq!(area.reach(&Vec3::new(92.0, 0.0, -20.0), &x, 200.0), 0.0);
     }
 
     /// On a curved chest the probe stands tilted at a line's end: a point beside the

@@ -60,13 +60,13 @@ use self::motion::Segment;
 use self::target::target;
 use crate::acquisition::compound::{Compounder, DEFAULT_MAX_COARSENINGS};
 use crate::acquisition::probe::Calibration;
-use crate::config::Config;
+use crate::config::{Config, RIBS};
 use crate::error::{Error, Result};
 use crate::limits::{MIN_CLOUD_POINTS, OUTBOX, SKELETON_POINTS, SOM1_CAPACITY, TRACK_CAPACITY};
 use crate::math::geom::Rigid;
 use crate::registration::local_rigid::{Lookup, TransformCache};
 use crate::registration::pipeline::{Registering, Registration, Template};
-use crate::registration::reach::{check_edges, cut_sides, edge_clearances};
+use crate::registration::reach::{check_edges, cut_sides, edge_clearance};
 
 use crate::acquisition::track::TrackedPose;
 use crate::wire::{
@@ -144,9 +144,9 @@ pub struct Controller<const VOXELS: usize> {
     targets: heapless::Vec<ProbeTarget, MAX_WAYPOINTS>,
     /// The last registration's confidence, sent with its result.
     confidence: Option<RegistrationW>,
-    /// The last registration's rib ends against the sweep's imaged area
-    /// ([`edge_clearances`]), once checked.
-    edges: Option<[[f32; 2]; 4]>,
+    /// The last registration's rib ends against the sweep's imaged region
+    /// ([`edge_clearance`], one rib a call) and how many ribs are done.
+    edges: ([[f32; 2]; 4], usize),
     /// The next waypoint's transform being found (bounded steps), then found.
     lookup: Option<Lookup>,
     mapped: Option<(Rigid, u32)>,
@@ -192,7 +192,7 @@ impl<const VOXELS: usize> Controller<VOXELS> {
             registering: None,
             targets: heapless::Vec::new(),
             confidence: None,
-            edges: None,
+            edges: ([[f32::NAN; 2]; 4], 0),
             lookup: None,
             mapped: None,
             waypoint_cache: TransformCache::new(),
@@ -569,7 +569,7 @@ impl<const VOXELS: usize> Controller<VOXELS> {
             } else if self.sweep.cloud.finish_some(0) {
                 self.targets.clear();
                 self.confidence = None;
-                self.edges = None;
+                self.edges = ([[f32::NAN; 2]; 4], 0);
                 self.start_registration(&cfg);
             } else {
                 self.sweep.cloud.finish_some(VOXELS_FINISHED_PER_POLL);
@@ -585,17 +585,18 @@ impl<const VOXELS: usize> Controller<VOXELS> {
         let outcome = match r.step(template, cloud, &cfg, SOM_ITERATIONS_PER_POLL) {
             Ok(false) => return,
             // The registration's last step is a call of its own, and so is the check of
-            // its rib ends against where the sweep imaged: a partial plan drives to
+            // each rib's ends against where the sweep imaged: a partial plan drives to
             // neither side with a rib end at the sweep's edge.
             Ok(true) if !finished_before => return,
-            Ok(true) if self.edges.is_none() => {
+            Ok(true) if self.edges.1 < RIBS.len() => {
                 let Some(reg) = r.registration() else { return };
                 let area = &self.sweep.imaged;
-                let edges = edge_clearances(reg, |p, u, max| area.reach(p, u, max));
-                self.edges = Some(edges);
+                let (edges, done) = &mut self.edges;
+                edges[*done] = edge_clearance(reg, *done, |p, u, max| area.reach(p, u, max));
+                *done += 1;
                 let partial = self.settings.as_ref().is_some_and(|s| s.partial);
-                match check_edges(&edges) {
-                    Err(e) if !partial => Err(e),
+                match check_edges(edges) {
+                    Err(e) if *done == RIBS.len() && !partial => Err(e),
                     _ => return,
                 }
             }
@@ -639,7 +640,7 @@ impl<const VOXELS: usize> Controller<VOXELS> {
                         // Note: a push cannot fail, waypoints and targets share MAX_WAYPOINTS.
                         match t.map(|t| self.targets.push(t)) {
                             Ok(_) if self.targets.len() < self.waypoints.len() => return,
-                            Ok(_) => mark_supported(&mut self.targets, self.edges),
+                            Ok(_) => mark_supported(&mut self.targets, self.edges.0),
                             Err(e) => Err(e),
                         }
                     }
@@ -651,7 +652,7 @@ impl<const VOXELS: usize> Controller<VOXELS> {
         };
         if outcome.is_ok() {
             if let Some(reg) = r.registration() {
-                self.confidence = Some(confidence(reg, self.edges, self.targets.len()));
+                self.confidence = Some(confidence(reg, self.edges.0, self.targets.len()));
             }
         }
         self.registering = None;
@@ -695,12 +696,13 @@ impl<const VOXELS: usize> Controller<VOXELS> {
 
 /// Marks the targets of a partial plan that are not driven to
 /// ([`crate::registration::reach::WaypointReach::supported`], and every target on a side
-/// with a rib end at the sweep's edge, [`cut_sides`] of `edges`); a plan that keeps none
-/// is refused ([`crate::registration::reach::check_plan`], or the edge's
-/// [`Error::SweepEdge`]). (Without a partial plan every target is reached already: an
-/// unreached one, or a rib end at the edge, refused the plan before.)
-fn mark_supported(targets: &mut [ProbeTarget], edges: Option<[[f32; 2]; 4]>) -> Result<()> {
-    let cut = edges.map_or([false; 2], |e| cut_sides(&e));
+/// with a rib end at the sweep's edge, [`cut_sides`] of `edges`, NaN where not
+/// measured); a plan that keeps none is refused
+/// ([`crate::registration::reach::check_plan`], or the edge's [`Error::SweepEdge`]).
+/// (Without a partial plan every target is reached already: an unreached one, or a rib
+/// end at the edge, refused the plan before.)
+fn mark_supported(targets: &mut [ProbeTarget], edges: [[f32; 2]; 4]) -> Result<()> {
+    let cut = cut_sides(&edges);
     let mut keep = [true; MAX_WAYPOINTS];
     for (k, t) in keep.iter_mut().zip(targets.iter()) {
         let plan = targets.iter().filter_map(|t| t.reach.as_ref());
@@ -712,14 +714,15 @@ fn mark_supported(targets: &mut [ProbeTarget], edges: Option<[[f32; 2]; 4]>) -> 
         t.supported = k;
     }
     crate::registration::reach::check_plan(targets.iter().map(|t| t.reach.as_ref()), true)?;
-    match edges {
-        Some(e) if !targets.iter().any(|t| t.supported) => check_edges(&e),
-        _ => Ok(()),
+    if targets.iter().any(|t| t.supported) {
+        Ok(())
+    } else {
+        check_edges(&edges)
     }
 }
 
 /// The wire summary of how clearly `reg` found the patient.
-fn confidence(reg: &Registration, edges: Option<[[f32; 2]; 4]>, waypoints: usize) -> RegistrationW {
+fn confidence(reg: &Registration, edges: [[f32; 2]; 4], waypoints: usize) -> RegistrationW {
     let spans = reg.coverage.unwrap_or([[f32::NAN; 2]; 4]);
     // NaN (no evidence, or the graph model) counts as 0 %.
     let least = spans.iter().flatten().fold(
@@ -735,11 +738,7 @@ fn confidence(reg: &Registration, edges: Option<[[f32; 2]; 4]>, waypoints: usize
         // `as` saturates: 0..=255 %.
         min_side_span_percent: (least * 100.0 + 0.5) as u8,
         // NaN (a rib side not seen) is left out; none measured is NaN.
-        min_edge_clearance_mm: edges
-            .iter()
-            .flatten()
-            .flatten()
-            .fold(f32::NAN, |a, &b| a.min(b)),
+        min_edge_clearance_mm: edges.iter().flatten().fold(f32::NAN, |a, &b| a.min(b)),
         waypoints: waypoints as u8,
     }
 }

@@ -157,67 +157,79 @@ pub const MIN_EDGE_CLEARANCE_MM: f32 = 3.0;
 pub const EDGE_LOOK_MM: f32 = 20.0;
 
 /// Per rib (2..=5) and side (`[right, left]`), the end of the rib the sweep shows
+/// ([`rib_end`] of each).
+pub fn rib_ends(registration: &Registration) -> [[Option<(Vec3, Vec3)>; 2]; 4] {
+    core::array::from_fn(|r| rib_end(registration, r))
+}
+
+/// Per side (`[right, left]`), the end of rib `RIBS[r]` the sweep shows
 /// ([`Registration::reach`], before any short rib is lengthened) as a point of the
 /// target frame, and the direction on out along the rib there: the target skeleton's
 /// polyline of that rib, in the fitting frame, at the end's x (extended along its last
 /// segment beyond the polyline). `None` for a rib not seen, the graph model, or a
 /// skeleton not finite.
-pub fn rib_ends(registration: &Registration) -> [[Option<(Vec3, Vec3)>; 2]; 4] {
-    let mut out = [[None; 2]; 4];
-    let Some(reach) = registration.reach else {
+pub fn rib_end(registration: &Registration, r: usize) -> [Option<(Vec3, Vec3)>; 2] {
+    let mut out = [None; 2];
+    let (Some(reach), Some(&n)) = (registration.reach, RIB_SAMPLES.get(r)) else {
         return out;
     };
+    let offset: usize = RIB_SAMPLES[..r].iter().sum();
+    let rib = &registration.skeleton.points[offset..offset + n];
+    let (x0, _, x1) = reach[r];
+    // A rib not seen: no end (NaN compares false).
+    if x0.is_nan() || x1.is_nan() || x0 > x1 {
+        return out;
+    }
     let to_target = registration.pose.inverse();
-    let mut offset = 0;
-    for (r, &n) in RIB_SAMPLES.iter().enumerate() {
-        let rib = &registration.skeleton.points[offset..offset + n];
-        offset += n;
-        let (x0, _, x1) = reach[r];
-        // A rib not seen: no end (NaN compares false).
-        if x0.is_nan() || x1.is_nan() || x0 > x1 {
+    for (end, (x, outward)) in out.iter_mut().zip([(x0, -1.0f32), (x1, 1.0)]) {
+        // The segment whose x range lies nearest the end's x.
+        let mut best: Option<(f32, Vec3, Vec3)> = None;
+        for s in rib.windows(2) {
+            let (a, b) = (
+                registration.pose.apply(&s[0]),
+                registration.pose.apply(&s[1]),
+            );
+            let (lo, hi) = (a.x.min(b.x), a.x.max(b.x));
+            let gap = (lo - x).max(x - hi).max(0.0);
+            if best.is_none_or(|(g, _, _)| gap < g) {
+                best = Some((gap, a, b));
+            }
+        }
+        let Some((_, a, b)) = best else { continue };
+        let d = b - a;
+        if d.x.is_nan() || d.x.abs() <= 1e-3 {
             continue;
         }
-        for (side, (x, outward)) in [(x0, -1.0f32), (x1, 1.0)].into_iter().enumerate() {
-            // The segment whose x range lies nearest the end's x, end first.
-            let mut best: Option<(f32, Vec3, Vec3)> = None;
-            for s in rib.windows(2) {
-                let (a, b) = (
-                    registration.pose.apply(&s[0]),
-                    registration.pose.apply(&s[1]),
-                );
-                let (lo, hi) = (a.x.min(b.x), a.x.max(b.x));
-                let gap = (lo - x).max(x - hi).max(0.0);
-                if best.is_none_or(|(g, _, _)| gap < g) {
-                    best = Some((gap, a, b));
-                }
-            }
-            let Some((_, a, b)) = best else { continue };
-            let d = b - a;
-            if d.x.is_nan() || d.x.abs() <= 1e-3 {
-                continue;
-            }
-            let at = a + d * ((x - a.x) / d.x);
-            let dir = if d.x * outward >= 0.0 { d } else { -d };
-            let (p, u) = (to_target.apply(&at), to_target.rotation * dir);
-            if p.iter().chain(u.iter()).all(|v| v.is_finite()) {
-                out[r][side] = Some((p, u));
-            }
+        let at = a + d * ((x - a.x) / d.x);
+        let dir = if d.x * outward >= 0.0 { d } else { -d };
+        let (p, u) = (to_target.apply(&at), to_target.rotation * dir);
+        if p.iter().chain(u.iter()).all(|v| v.is_finite()) {
+            *end = Some((p, u));
         }
     }
     out
 }
 
 /// Per rib (2..=5) and side (`[right, left]`), how far beyond the rib's end
-/// ([`rib_ends`]) the sweep imaged without a break, mm, up to [`EDGE_LOOK_MM`]:
-/// `reach(from, direction, max)` is the imaged region's
-/// ([`crate::acquisition::imaged::ImagedArea::reach`], target frame = robot base). NaN
-/// where [`rib_ends`] gives none.
+/// ([`rib_ends`]) the sweep imaged without a break ([`edge_clearance`] of each).
 pub fn edge_clearances(
     registration: &Registration,
     reach: impl Fn(&Vec3, &Vec3, f32) -> f32,
 ) -> [[f32; 2]; 4] {
-    rib_ends(registration)
-        .map(|sides| sides.map(|end| end.map_or(f32::NAN, |(p, u)| reach(&p, &u, EDGE_LOOK_MM))))
+    core::array::from_fn(|r| edge_clearance(registration, r, &reach))
+}
+
+/// Per side (`[right, left]`), how far beyond the end of rib `RIBS[r]` ([`rib_end`])
+/// the sweep imaged without a break, mm, up to [`EDGE_LOOK_MM`]: `reach(from,
+/// direction, max)` is the imaged region's
+/// ([`crate::acquisition::imaged::ImagedArea::reach`], target frame = robot base). NaN
+/// where [`rib_end`] gives none.
+pub fn edge_clearance(
+    registration: &Registration,
+    r: usize,
+    reach: impl Fn(&Vec3, &Vec3, f32) -> f32,
+) -> [f32; 2] {
+    rib_end(registration, r).map(|end| end.map_or(f32::NAN, |(p, u)| reach(&p, &u, EDGE_LOOK_MM)))
 }
 
 /// Refuses a registration a rib end of which lies at the edge of what the sweep
