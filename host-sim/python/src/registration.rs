@@ -30,6 +30,7 @@ use ribreg_core::registration::local_rigid::TransformCache;
 use ribreg_core::registration::pipeline::{
     Registration as CoreRegistration, Template as CoreTemplate,
 };
+use ribreg_core::registration::reach;
 use ribreg_core::wire::error_code;
 use ribreg_core::{Error as CoreError, Vec3};
 use ribreg_sim::io::prepared::TemplateFile;
@@ -38,6 +39,7 @@ use ribreg_sim::register::{
     build_template, register_clouds, supported, to_core, to_file, Mapped, Method, Options,
     HOST_CACHE,
 };
+use ribreg_sim::sweep;
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -373,12 +375,15 @@ impl Registration {
 /// what the sweep shows, as `ribreg register --waypoints` does: a waypoint the sweep
 /// does not reach raises `RegistrationError` (code 24), or with `partial=True` is marked
 /// in `Registration.supported`. `target_up` is the patient's anterior in the target's
-/// frame, roughly (three numbers, `ribreg register --target-up`). `partial` and
-/// `target_up` need the improved method.
+/// frame, roughly (three numbers, `ribreg register --target-up`). `imaged` is the file of
+/// the sweep's lines the target was compounded from (`ribreg compound --imaged`): a rib
+/// end the sweep did not image at least 3 mm past raises `RegistrationError` (code 27),
+/// or with `partial=True` marks that side's waypoints, as `ribreg register --imaged`
+/// does. `partial`, `target_up` and `imaged` need the improved method.
 #[pyfunction]
 #[pyo3(signature = (
     template, target, labels=None, *, waypoints=None, partial=false, target_up=None,
-    method="improved", prepared=None
+    method="improved", prepared=None, imaged=None
 ))]
 #[allow(clippy::too_many_arguments)]
 fn register(
@@ -391,8 +396,18 @@ fn register(
     target_up: Option<PyArrayLike1<'_, f64, AllowTypeChange>>,
     method: &str,
     prepared: Option<PyRef<'_, Template>>,
+    imaged: Option<PathBuf>,
 ) -> PyResult<Registration> {
     let method = method_of(method)?;
+    let imaged = match &imaged {
+        Some(path) => {
+            let rows = io::read_table_csv(path, sweep::IMAGED_COLUMNS).map_err(io_err)?;
+            let area = sweep::lines_from_rows(&rows)
+                .map_err(|e| PyValueError::new_err(format!("{}: {e}", path.display())))?;
+            Some(Box::new(area))
+        }
+        None => None,
+    };
     let target = rows(&target, "target")?;
     let target = to_core(&target, Which::Target).map_err(value_err)?;
     let waypoints = match &waypoints {
@@ -400,10 +415,10 @@ fn register(
         None => None,
     };
     let target_up = target_up.map(|v| direction(&v)).transpose()?;
-    if method == Method::Paper && (partial || target_up.is_some()) {
+    if method == Method::Paper && (partial || target_up.is_some() || imaged.is_some()) {
         return Err(PyValueError::new_err(
-            "partial and target_up need the improved method (the paper's has no rib extents \
-             and no pose hypotheses)",
+            "partial, target_up and imaged need the improved method (the paper's has no rib \
+             extents and no pose hypotheses)",
         ));
     }
     let how = Options {
@@ -474,10 +489,25 @@ fn register(
         }
     }
     .map_err(|e| refused(py, &e))?;
+    // The rib ends against where the sweep imaged: refused, or with a partial plan that
+    // side marked (and refused when nothing is kept).
+    let cut = match &imaged {
+        Some(area) => {
+            let edges =
+                reach::edge_clearances(&outcome.registration, |p, u, m| area.reach(p, u, m));
+            let cut = reach::cut_sides(&edges);
+            let kept = supported(&outcome.reach, cut);
+            if !partial || !kept.iter().any(|&k| k) {
+                reach::check_edges(&edges).map_err(|e| refused(py, &e))?;
+            }
+            cut
+        }
+        None => [false; 2],
+    };
     let mapped = outcome.waypoints.as_deref().map(|w| {
         // Only a partial plan marks waypoints: every other one was checked in full.
         let marks = if partial {
-            supported(&outcome.reach, [false; 2])
+            supported(&outcome.reach, cut)
         } else {
             vec![true; w.len()]
         };

@@ -285,3 +285,49 @@ def test_readers(tmp_path, phantoms):
     assert points.shape == (10, 3) and names == [""] * 10
     target, labels = ribreg.read_cloud(ph / "target.ply")
     assert labels is None and target.dtype == np.float64
+
+
+def swept(ribreg_bin, tmp_path, margin):
+    """`ribreg phantom sweep --seed 1 --margin-mm MARGIN`, compounded with its lines."""
+    d = tmp_path / f"sweep{margin}"
+    subprocess.run([ribreg_bin, "-q", "phantom", "sweep", "--seed", "1", "--margin-mm",
+                    str(margin), "--out-dir", d], check=True)
+    subprocess.run([ribreg_bin, "-q", "compound", "--poses", d / "poses.csv", "--frames",
+                    d / "frames.csv", "--probe", d / "probe.json", "--lag-ms", "268",
+                    "-o", d / "us.ply", "--imaged", d / "lines.csv"], check=True)
+    return d
+
+
+def test_a_rib_end_at_the_sweep_s_edge_is_refused_as_by_the_cli(ribreg_bin, tmp_path):
+    """As `ribreg register --imaged`: a sweep whose lines stop 20 mm inside the
+    cartilages is refused (code 27, the CLI's message), with `partial=True` too (both
+    sides are cut); the default sweep, 20 mm past them, is registered."""
+    for margin in (20, -20):
+        d = swept(ribreg_bin, tmp_path, margin)
+        template, labels = ribreg.read_cloud(d / "template.ply")
+        target, _ = ribreg.read_cloud(d / "us.ply")
+        planned, _ = ribreg.read_waypoints(d / "waypoints.csv")
+        if margin == 20:
+            reg = ribreg.register(template, target, labels, waypoints=planned,
+                                  partial=True, imaged=d / "lines.csv")
+            assert all(reg.supported)
+            continue
+        cli = subprocess.run(
+            [ribreg_bin, "register", "-q", "--template", d / "template.ply", "--target",
+             d / "us.ply", "--waypoints", d / "waypoints.csv", "--out",
+             tmp_path / "registered.ply", "--imaged", d / "lines.csv"],
+            capture_output=True, text=True)
+        for partial in (False, True):
+            with pytest.raises(ribreg.RegistrationError) as e:
+                ribreg.register(template, target, labels, waypoints=planned,
+                                partial=partial, imaged=str(d / "lines.csv"))
+            assert e.value.code == 27
+            assert cli.returncode == 2 and str(e.value) in cli.stderr, cli.stderr
+        # Without the lines the cloud alone passes: what the check is for.
+        ribreg.register(template, target, labels, waypoints=planned)
+    with pytest.raises(ValueError, match="imaged need the improved method"):
+        ribreg.register(template, target, waypoints=planned, method="paper",
+                        imaged=d / "lines.csv")
+    (tmp_path / "bad.csv").write_text("line,end\n0,0\n")
+    with pytest.raises(ValueError, match="bad.csv"):
+        ribreg.register(template, target, labels, imaged=tmp_path / "bad.csv")

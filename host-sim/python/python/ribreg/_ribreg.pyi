@@ -101,9 +101,11 @@ def register(
     target_up: Optional[npt.ArrayLike] = None,
     method: str = "improved",
     prepared: Optional[Template] = None,
+    imaged: Optional[_Path] = None,
 ) -> Registration:
     """Registers the template onto the target (``method``: "improved" or "paper"),
-    mapping and checking ``waypoints``."""
+    mapping and checking ``waypoints`` (and, with ``imaged``, every rib end against the
+    sweep's lines from ``ribreg compound --imaged``)."""
 
 def read_cloud(
     path: _Path,
