@@ -494,11 +494,8 @@ impl Mapped {
         area: &ImagedArea<IMAGED_LINES>,
         partial: bool,
     ) -> Result<[[f32; 2]; 4], Error> {
-        let edges = reach::edge_clearances(&self.reg, |p, u, max| area.reach(p, u, max));
-        self.cut = reach::cut_sides(&edges);
-        if !partial || !self.supported().iter().any(|&k| k) {
-            reach::check_edges(&edges)?;
-        }
+        let (edges, cut) = check_edges(&self.reg, &self.reach, area, partial)?;
+        self.cut = cut;
         Ok(edges)
     }
 
@@ -609,6 +606,25 @@ fn skeleton_json(tpl: &Template, reg: &Registration) -> Value {
         "target": pts(&reg.skeleton.points),
         "ribs": ribs,
     })
+}
+
+/// Every rib end `registration` shows against where the sweep imaged (`area`,
+/// [`reach::edge_clearances`]), for a plan whose waypoints' reach is `reach`: refused
+/// ([`reach::check_edges`]) when one lies at the sweep's edge, unless `partial`, which
+/// keeps the plan with that side marked ([`supported`]) and is refused only when that
+/// keeps none. The clearances and the sides cut ([`reach::cut_sides`]).
+pub fn check_edges(
+    registration: &Registration,
+    reach: &[Option<WaypointReach>],
+    area: &ImagedArea<IMAGED_LINES>,
+    partial: bool,
+) -> Result<([[f32; 2]; 4], [bool; 2]), Error> {
+    let edges = reach::edge_clearances(registration, |p, u, max| area.reach(p, u, max));
+    let cut = reach::cut_sides(&edges);
+    if !partial || !supported(reach, cut).iter().any(|&k| k) {
+        reach::check_edges(&edges)?;
+    }
+    Ok((edges, cut))
 }
 
 /// Per waypoint, whether a partial plan keeps it ([`WaypointReach::supported`]; `true`

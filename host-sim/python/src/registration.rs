@@ -30,14 +30,13 @@ use ribreg_core::registration::local_rigid::TransformCache;
 use ribreg_core::registration::pipeline::{
     Registration as CoreRegistration, Template as CoreTemplate,
 };
-use ribreg_core::registration::reach;
 use ribreg_core::wire::error_code;
 use ribreg_core::{Error as CoreError, Vec3};
 use ribreg_sim::io::prepared::TemplateFile;
 use ribreg_sim::io::{self, Cloud, IoError};
 use ribreg_sim::register::{
-    build_template, register_clouds, supported, to_core, to_file, Mapped, Method, Options,
-    HOST_CACHE,
+    build_template, check_edges, register_clouds, supported, to_core, to_file, Mapped, Method,
+    Options, HOST_CACHE,
 };
 use ribreg_sim::sweep;
 use std::path::PathBuf;
@@ -493,14 +492,9 @@ fn register(
     // side marked (and refused when nothing is kept).
     let cut = match &imaged {
         Some(area) => {
-            let edges =
-                reach::edge_clearances(&outcome.registration, |p, u, m| area.reach(p, u, m));
-            let cut = reach::cut_sides(&edges);
-            let kept = supported(&outcome.reach, cut);
-            if !partial || !kept.iter().any(|&k| k) {
-                reach::check_edges(&edges).map_err(|e| refused(py, &e))?;
-            }
-            cut
+            check_edges(&outcome.registration, &outcome.reach, area, partial)
+                .map_err(|e| refused(py, &e))?
+                .1
         }
         None => [false; 2],
     };
