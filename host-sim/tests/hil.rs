@@ -116,6 +116,31 @@ fn setpoints_stop_when_robot_poses_stop() {
     assert!(r.max_error() <= hil::TOLERANCE_MM);
 }
 
+/// Hard phantom 49's full sweep: the simulated robot's TCP, resting at a target, drifted
+/// off a rotation until the controller refused its pose reports and execution never
+/// finished (README "A robot pose that stays a rotation"). It now drives to every
+/// waypoint, and nothing the robot sends is refused.
+#[test]
+fn a_long_execution_keeps_the_robot_s_poses_valid_to_the_end() {
+    let phantom = PhantomConfig {
+        seed: 49,
+        preset: ribreg_sim::phantom::Preset::Hard,
+        ..PhantomConfig::default()
+    };
+    let r = hil::run_with(
+        &mut Session::new(InProcess::new()),
+        &phantom,
+        RunOptions::default(),
+        &mut |_| {},
+    )
+    .unwrap();
+    consistent(&r);
+    assert!(r.refused.is_empty(), "{:?}", r.refused);
+    assert_eq!(r.pose_timeouts, 0);
+    assert_eq!(r.waypoints.len(), 10);
+    assert!(r.max_error() <= hil::TOLERANCE_MM, "{:?}", r.waypoints);
+}
+
 #[test]
 fn a_missing_serial_device_is_one_clear_error() {
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_ribreg"))

@@ -60,12 +60,18 @@ impl TrackedPose {
 
     /// The pose of a rigid transform (its rotation must be proper).
     pub fn from_rigid(t: f64, pose: &Rigid) -> TrackedPose {
+        // Normalised: `from_rotation_matrix` of a rotation that f32 products have left a
+        // little off orthonormal is a little off unit norm, and that quaternion's matrix
+        // further off still (its scale squared). A pose taken from its own matrix at
+        // every step, as a robot's TCP following setpoints, then diverged (the simulated
+        // robot's reports reached norm 1.065 within 1.6 s of resting at a target, and
+        // the controller refused them).
+        let q =
+            UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(pose.rotation));
         TrackedPose {
             t,
             position: pose.translation,
-            orientation: UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(
-                pose.rotation,
-            )),
+            orientation: UnitQuaternion::new_normalize(q.into_inner()),
         }
     }
 
@@ -86,10 +92,13 @@ impl TrackedPose {
             q1 = UnitQuaternion::new_unchecked(-q1.into_inner());
         }
         // The shorter arc is at most 90° in quaternion space, so slerp is well defined;
-        // nlerp is the fallback should it ever refuse.
+        // nlerp is the fallback should it ever refuse. Between two orientations less
+        // than a degree apart f32 slerp's weights (from `acos` and `sqrt` of a cosine
+        // rounded near 1) miss unit norm by up to ~1e-4, so the result is normalised.
         let q = q0
             .try_slerp(&q1, s, 1e-6)
             .unwrap_or_else(|| q0.nlerp(&q1, s));
+        let q = UnitQuaternion::new_normalize(q.into_inner());
         Rigid {
             rotation: q.to_rotation_matrix().into_inner(),
             translation: self.position.lerp(&next.position, s),
@@ -308,6 +317,32 @@ mod tests {
             "{}",
             got.angle_to(&expected)
         );
+    }
+
+    /// The simulated robot's TCP, taken from its own matrix and slerped toward a target
+    /// at every setpoint, drifted off unit norm and diverged (README "Controller and
+    /// firmware"): both steps now stay rotations.
+    #[test]
+    fn poses_stay_rotations_off_orthonormal_input_and_close_slerps() {
+        let p = pose(0.0, 3.0, 33.0);
+        let mut r = p.to_rigid();
+        r.rotation *= 1.0003;
+        let back = TrackedPose::from_rigid(0.0, &r);
+        assert!((back.orientation.into_inner().norm() - 1.0).abs() < 1e-6);
+        assert!(back.orientation.angle_to(&p.orientation) < 1e-3);
+        let a = pose(0.0, 0.0, 33.0);
+        for j in 1..=100 {
+            let b = pose(0.01, 0.0, 33.0 + j as f32 * 0.02);
+            for k in 1..10 {
+                let r = a.interpolate(&b, k as f32 / 10.0).rotation;
+                let off = (r.transpose() * r - nalgebra::Matrix3::identity()).amax();
+                assert!(
+                    off < 1e-6,
+                    "{}°, s {k}/10: R^T R − I up to {off}",
+                    j as f32 * 0.02
+                );
+            }
+        }
     }
 
     #[test]

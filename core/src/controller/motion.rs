@@ -8,7 +8,6 @@ use super::Controller;
 use crate::acquisition::track::TrackedPose;
 use crate::math::geom::Rigid;
 use crate::wire::{FromController, SetpointW, State};
-use nalgebra::{Rotation3, UnitQuaternion};
 
 /// Robot poses may pause this long while executing before setpoints stop, µs.
 pub const POSE_TIMEOUT_US: u64 = 50_000;
@@ -66,8 +65,7 @@ impl<const VOXELS: usize> Controller<VOXELS> {
             )
         };
         self.waypoint = seg.target;
-        let q =
-            UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(pose.rotation));
+        let q = TrackedPose::from_rigid(0.0, &pose).orientation;
         self.send(FromController::Setpoint(SetpointW {
             t_us: now_us,
             position: pose.translation.into(),

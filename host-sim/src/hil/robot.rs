@@ -134,3 +134,63 @@ pub fn aim_point(tcp: &Rigid) -> [f64; 3] {
     let p = tcp.translation + tcp.rotation.column(2) * STANDOFF_MM;
     [f64::from(p.x), f64::from(p.y), f64::from(p.z)]
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{UnitQuaternion, Vector3};
+    use ribreg_core::acquisition::track::QUATERNION_NORM_TOLERANCE;
+    use ribreg_core::math::rng::Rng;
+
+    /// Hard phantom 49's execution (`hil --in-process --seed 49 --preset hard`) stalled:
+    /// resting at a target, the TCP's quaternion, taken from its rotation matrix at every
+    /// setpoint, grew off unit norm (1.0002 → 1.065 within 1.6 s of dwell) until the
+    /// controller refused the robot's pose reports and stopped its setpoints.
+    #[test]
+    fn the_reported_pose_stays_a_rotation_while_resting_at_targets() {
+        let ee_t_tcp = crate::sweep::default_calibration().ee_t_tcp;
+        let standing = ([117.6, -22.0, -24.8], [0.5, -0.5, -0.5, 0.5]);
+        let mut robot = Robot::standing(Some(standing), ee_t_tcp).unwrap();
+        robot.start_executing();
+        let mut rng = Rng::new(49);
+        let mut t_us = 0;
+        // 40 targets in random orientations, each held for 3 s of 100 Hz setpoints.
+        for target in 0..40u8 {
+            let axis = Vector3::new(
+                rng.next_f32() - 0.5,
+                rng.next_f32() - 0.5,
+                rng.next_f32() - 0.5,
+            );
+            let q = UnitQuaternion::from_scaled_axis(axis.normalize() * 3.0 * rng.next_f32());
+            let sp = SetpointW {
+                t_us,
+                position: [
+                    (rng.next_f32() - 0.5) * 50.0,
+                    (rng.next_f32() - 0.5) * 50.0,
+                    -30.0,
+                ],
+                quat: [q.w, q.i, q.j, q.k],
+                waypoint: target,
+            };
+            for _ in 0..300 {
+                t_us += 10_000;
+                robot.follow(&sp).unwrap();
+                robot.update_flange();
+                let ToController::Pose(p) = robot.pose(t_us) else {
+                    unreachable!()
+                };
+                let norm = p.quat.iter().map(|v| v * v).sum::<f32>().sqrt();
+                assert!(
+                    (norm - 1.0).abs() < 1e-2 * QUATERNION_NORM_TOLERANCE,
+                    "target {target}, {t_us} µs: quaternion norm {norm}"
+                );
+                let rot = robot.tcp().rotation;
+                let off = (rot.transpose() * rot - nalgebra::Matrix3::identity()).amax();
+                assert!(
+                    off < 1e-5,
+                    "target {target}, {t_us} µs: R^T R − I up to {off}"
+                );
+            }
+        }
+    }
+}
