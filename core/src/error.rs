@@ -152,7 +152,10 @@ pub enum Error {
         /// Minimum needed.
         min: u32,
     },
-    /// A sample has a NaN/infinite value or a time stamp not later than the one before.
+    /// A sample has a NaN/infinite value, a value out of range (a coordinate beyond
+    /// [`crate::limits::MAX_COORD_MM`], a pose's quaternion further than
+    /// [`crate::acquisition::track::QUATERNION_NORM_TOLERANCE`] from unit norm) or a time
+    /// stamp not later than the one before.
     Sample {
         /// Which stream.
         stream: Stream,
@@ -383,7 +386,8 @@ impl fmt::Display for Error {
             }
             Error::Sample { stream, index } => write!(
                 f,
-                "{stream} sample {index} is not finite or not later than the sample before it"
+                "{stream} sample {index} is not finite, out of range (a coordinate, or a \
+                 quaternion off unit norm) or not later than the sample before it"
             ),
             Error::Swing { stream, found, min } => {
                 let unit = if stream == Stream::Video { "px" } else { "mm" };

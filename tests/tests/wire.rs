@@ -959,8 +959,9 @@ fn corrupted_frames_are_refused() {
 /// a fault prints as text (what `ribreg hil` shows), not as a number alone.
 #[test]
 fn error_codes_have_summaries() {
+    use ribreg_core::acquisition::track::TrackedPose;
     use ribreg_core::error::Side;
-    use ribreg_core::Error;
+    use ribreg_core::{Error, Vec3};
     for code in 1..=27 {
         assert_ne!(wire::error_summary(code), "unknown error", "code {code}");
     }
@@ -1027,4 +1028,13 @@ fn error_codes_have_summaries() {
         "registration refused: a rib side was not seen in the sweep (scan it and register \
          again) (error code 20)"
     );
+    // A robot pose off unit norm is refused as a sample, and the NACK says so.
+    let off_unit = TrackedPose::new(0.0, Vec3::zeros(), [1.05, 0.0, 0.0, 0.0]).unwrap_err();
+    let nack = wire::NackCode::Invalid(wire::error_code(&off_unit));
+    assert_eq!(
+        nack.to_string(),
+        "content refused: an invalid sample (a robot pose, a frame or a calibration row) \
+         (error code 14)"
+    );
+    assert!(off_unit.to_string().contains("quaternion off unit norm"));
 }

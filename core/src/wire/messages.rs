@@ -433,7 +433,7 @@ pub fn error_summary(code: u8) -> &'static str {
         11 => "a capacity was exceeded",
         12 => "invalid configuration or state",
         13 => "too few calibration samples",
-        14 => "an invalid calibration sample",
+        14 => "an invalid sample (a robot pose, a frame or a calibration row)",
         15 => "the calibration motion is too small",
         16 => "the temporal calibration did not correlate",
         17 => "a frame lies outside the tracked poses",
@@ -460,6 +460,23 @@ pub fn error_summary(code: u8) -> &'static str {
                and register again, or configure a partial plan)"
         }
         _ => "unknown error",
+    }
+}
+
+impl core::fmt::Display for NackCode {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            NackCode::Corrupt => f.write_str("corrupt frame (COBS, CRC or decoding)"),
+            NackCode::OutOfOrder => f.write_str("sequence number skipped"),
+            NackCode::TooLong => f.write_str("frame too long"),
+            NackCode::Version => f.write_str("wrong magic or version, or no handshake yet"),
+            NackCode::BadState => f.write_str("not allowed in the controller's state"),
+            NackCode::Invalid(code) => write!(
+                f,
+                "content refused: {} (error code {code})",
+                error_summary(*code)
+            ),
+        }
     }
 }
 

@@ -421,7 +421,16 @@ pub fn run_with<P: Port>(
     let mut quiet_ticks = 0;
     let mut exec_ms = 0u64;
     let (mut pose_timeouts, mut setpoints_in_gap) = (0u32, 0u32);
+    // The robot sends nothing the controller should refuse: a refused pose report stops
+    // the setpoints for good (the watchdog sees no pose), so say which at once rather
+    // than wait for the timeout.
+    let refused_before = session.refused.len();
     while !done {
+        if let Some((seq, code)) = session.refused.get(refused_before) {
+            return Err(CliError::Link(format!(
+                "the controller refused message {seq} while executing: {code}"
+            )));
+        }
         if exec_start.elapsed() > timeout {
             return Err(CliError::Link("execution did not finish in time".into()));
         }
