@@ -114,7 +114,16 @@ def run(session: Session, scenario: Scenario, progress: Callable[[str], None]) -
     quiet_ticks = 0
     pose_timeouts = 0
     tick_us = 10_000 if session.simulated_clock else 2_000
+    # A refused pose report stops the setpoints for good: say which, as `ribreg hil` does.
+    refused_before = len(session.refused)
     while not done:
+        refused = session.refused
+        if len(refused) > refused_before:
+            seq, code, detail = refused[refused_before]
+            raise LinkError(
+                f"the controller refused message {seq} while executing: {code.value}"
+                + ("" if detail is None else f" (error code {detail})")
+            )
         if time.monotonic() - start > TIMEOUT_S:
             raise LinkError("execution did not finish in time")
         session.advance(tick_us)
