@@ -742,6 +742,11 @@ pub struct EndToEnd {
     pub sweep_waypoints: (f64, f64, f64),
     /// Waypoint error registering onto the ideal cloud (`target.ply`).
     pub ideal_waypoints: (f64, f64, f64),
+    /// How far past the nearest rib end the compounded cloud shows the sweep imaged
+    /// (mm; the registration is refused below
+    /// [`ribreg_core::registration::reach::MIN_EDGE_CLEARANCE_MM`], as the controller's
+    /// and `register --imaged` are).
+    pub min_edge_clearance_mm: f32,
     /// Points of the ideal cloud.
     pub ideal_points: usize,
 }
@@ -774,6 +779,7 @@ impl EndToEnd {
                 "difference_of_means": self.sweep_waypoints.0 - self.ideal_waypoints.0,
             },
             "ideal_points": self.ideal_points,
+            "min_edge_clearance_mm": self.min_edge_clearance_mm,
         })
     }
 }
@@ -781,14 +787,17 @@ impl EndToEnd {
 /// The whole chain on the files `ribreg phantom sweep` wrote to `dir`: temporal
 /// calibration → compounding with the estimated lag → registration (improved method) of
 /// `template.ply` onto the compounded cloud and onto the ideal `target.ply` → waypoint
-/// errors against `true_waypoints.csv`. Writes `us_compounded.ply`, `lag.json` and
+/// errors against `true_waypoints.csv`. The registration onto the compounded cloud is
+/// checked against where the sweep imaged, as the controller's is
+/// ([`crate::register::check_edges`]): a rib end the probe did not image past is refused
+/// ([`Error::SweepEdge`]). Writes `us_compounded.ply`, `lag.json` and
 /// `mapped_waypoints*.csv` to `dir`.
 pub fn end_to_end(
     dir: &Path,
     voxel_mm: f32,
     progress: &mut dyn FnMut(&str),
 ) -> Result<EndToEnd, CliError> {
-    use crate::register::{register_clouds, to_core, to_core_labels, to_file, Method};
+    use crate::register::{check_edges, register_clouds, to_core, to_core_labels, to_file, Method};
     use ribreg_core::error::Cloud as Which;
     let lag = calibrate_temporal(&dir.join("calib_tracker.csv"), &dir.join("calib_video.csv"))?;
     progress(&format!(
@@ -819,7 +828,11 @@ pub fn end_to_end(
         Which::Query,
     )?;
     let truth = io::read_points_csv(&dir.join("true_waypoints.csv"))?;
-    let mut errors = |target: &[[f64; 3]], name: &str| -> Result<(f64, f64, f64), CliError> {
+    let mut least_clearance = f32::NAN;
+    let mut errors = |target: &[[f64; 3]],
+                      name: &str,
+                      imaged: Option<&ImagedArea<IMAGED_LINES>>|
+     -> Result<(f64, f64, f64), CliError> {
         let target = to_core(target, Which::Target)?;
         let o = register_clouds(
             &template_pts,
@@ -829,6 +842,14 @@ pub fn end_to_end(
             Method::Improved,
             &mut |_| {},
         )?;
+        if let Some(area) = imaged {
+            let (edges, _) = check_edges(&o.registration, &o.reach, area, false)?;
+            least_clearance = edges.iter().flatten().fold(f32::NAN, |a, &b| a.min(b));
+            progress(&format!(
+                "the sweep imaged at least {least_clearance:.1} mm past every rib end the \
+                 {name} cloud shows"
+            ));
+        }
         let mapped = o.waypoints.unwrap_or_default();
         io::write_points_csv(
             &dir.join(format!("mapped_waypoints_{name}.csv")),
@@ -841,14 +862,15 @@ pub fn end_to_end(
         ));
         Ok(e)
     };
-    let sweep_waypoints = errors(&compound.points, "compounded")?;
+    let sweep_waypoints = errors(&compound.points, "compounded", Some(&compound.imaged))?;
     let ideal = io::read_ply(&dir.join("target.ply"))?;
-    let ideal_waypoints = errors(&ideal.points, "ideal")?;
+    let ideal_waypoints = errors(&ideal.points, "ideal", None)?;
     Ok(EndToEnd {
         lag,
         compound,
         sweep_waypoints,
         ideal_waypoints,
         ideal_points: ideal.points.len(),
+        min_edge_clearance_mm: least_clearance,
     })
 }

@@ -363,3 +363,34 @@ fn a_sweep_that_stops_at_the_cartilages_is_refused_by_its_lines() {
         "row 1: expected line 0, end 0 then end 1",
     );
 }
+
+/// `demo --sweep` checks the compounded registration's rib ends against the sweep's
+/// lines, as the controller and `register --imaged` do: a sweep 20 mm past the
+/// cartilages passes and reports its least clearance, one that stops 20 mm inside them
+/// is refused.
+#[test]
+fn demo_sweep_checks_the_sweep_s_edge() {
+    let dir = tempfile::tempdir().unwrap();
+    let demo = |margin: &str| {
+        ribreg(&[
+            "-q",
+            "demo",
+            "--sweep",
+            "--seed",
+            "1",
+            "--sweep-margin-mm",
+            margin,
+            "--out-dir",
+            s(&dir.path().join(margin)),
+        ])
+    };
+    let out = stdout(&demo("20"));
+    assert!(out.contains("every rib end imaged"), "{out}");
+    let json: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("20/sweep/end_to_end.json")).unwrap(),
+    )
+    .unwrap();
+    let least = json["min_edge_clearance_mm"].as_f64().unwrap();
+    assert!(least > 10.0, "{json}");
+    assert_refused(&demo("-20"), "runs to the edge of the sweep");
+}

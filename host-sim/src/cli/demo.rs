@@ -24,11 +24,31 @@ pub struct Args {
     /// onto the compounded and onto the ideal US cloud (writes to OUT_DIR/sweep).
     #[arg(long)]
     sweep: bool,
+    /// With `--sweep`: how far the sweep's lines run past the cartilages' lateral extent,
+    /// mm (default 20); negative, they stop that far inside it, and the registration is
+    /// refused as the controller's is ("rib N runs to the edge of the sweep", down to
+    /// -60).
+    #[arg(
+        long,
+        value_name = "MM",
+        allow_negative_numbers = true,
+        requires = "sweep"
+    )]
+    sweep_margin_mm: Option<f64>,
 }
 
 pub fn run(args: &Args, ctx: &Context) -> Result<(), CliError> {
     if args.sweep {
-        return run_sweep(&args.phantom.config(), &args.out_dir.join("sweep"), ctx);
+        let mut cfg = SweepConfig::default();
+        if let Some(margin) = args.sweep_margin_mm {
+            cfg.margin_mm = margin;
+        }
+        return run_sweep(
+            &args.phantom.config(),
+            &cfg,
+            &args.out_dir.join("sweep"),
+            ctx,
+        );
     }
     let out_dir = &args.out_dir;
     let r = demo::run_demo(&args.phantom.config(), args.method, out_dir, &mut |l| {
@@ -55,16 +75,21 @@ pub fn run(args: &Args, ctx: &Context) -> Result<(), CliError> {
     Ok(())
 }
 
-fn run_sweep(phantom: &PhantomConfig, out_dir: &Path, ctx: &Context) -> Result<(), CliError> {
-    let cfg = SweepConfig::default();
-    super::phantom::run_sweep(phantom, &cfg, out_dir, ctx)?;
+fn run_sweep(
+    phantom: &PhantomConfig,
+    cfg: &SweepConfig,
+    out_dir: &Path,
+    ctx: &Context,
+) -> Result<(), CliError> {
+    super::phantom::run_sweep(phantom, cfg, out_dir, ctx)?;
     let r = sweep::end_to_end(out_dir, DEFAULT_VOXEL_MM, &mut |l| ctx.progress(l))?;
     let json = r.json(cfg.lag_ms);
     let text = serde_json::to_string_pretty(&json).map_err(|e| CliError::Output(e.to_string()))?;
     ribreg_sim::io::write_text(&out_dir.join("end_to_end.json"), &text)?;
     println!(
         "sweep demo: lag {:.1} ms (true {:.0}); compounded {} points; waypoint error {:.2} ± {:.2} mm \
-         (max {:.2}) vs {:.2} ± {:.2} mm (max {:.2}) on the ideal cloud: difference {:+.2} mm; outputs in {}",
+         (max {:.2}) vs {:.2} ± {:.2} mm (max {:.2}) on the ideal cloud: difference {:+.2} mm; \
+         every rib end imaged {:.1} mm past or more; outputs in {}",
         r.lag.lag_s * 1e3,
         cfg.lag_ms,
         r.compound.points.len(),
@@ -75,6 +100,7 @@ fn run_sweep(phantom: &PhantomConfig, out_dir: &Path, ctx: &Context) -> Result<(
         r.ideal_waypoints.1,
         r.ideal_waypoints.2,
         r.sweep_waypoints.0 - r.ideal_waypoints.0,
+        r.min_edge_clearance_mm,
         out_dir.display()
     );
     Ok(())
