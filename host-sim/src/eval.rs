@@ -120,6 +120,9 @@ pub struct CaseResult {
     pub dense: Summary,
     /// The same by structure: [`STRUCTURES`] (the sternum, then ribs 2..5).
     pub dense_by_structure: Vec<Summary>,
+    /// The dense error with each sternum point's truth taken by the sternum's landmarks
+    /// ([`PhantomPair::true_positions_by_landmarks`]): every point, then the sternum's.
+    pub dense_by_landmarks: [Summary; 2],
     /// Mean dense error of the cartilage points (every rib, both sides) in each of
     /// [`ALONG_BINS`] equal stretches from the sternum (material s 0) to the lateral tip
     /// (s 1), mm (NaN where a stretch holds no point).
@@ -243,6 +246,7 @@ fn evaluate(m: EvalMethod, pair: &PhantomPair, variant: Variant, seed: u64) -> C
         hd: f64::NAN,
         dense: Summary::default(),
         dense_by_structure: vec![],
+        dense_by_landmarks: Default::default(),
         dense_along_cartilage: vec![],
         waypoint_errors: vec![],
         waypoint_supported: vec![],
@@ -272,6 +276,15 @@ fn evaluate(m: EvalMethod, pair: &PhantomPair, variant: Variant, seed: u64) -> C
             let d: Vec<f64> = dense.iter().zip(&truth).map(|(a, b)| dist(a, b)).collect();
             r.dense = Summary::of(&d);
             (r.dense_by_structure, r.dense_along_cartilage) = dense_breakdown(pair, &d);
+            let by_landmarks: Vec<f64> = dense
+                .iter()
+                .zip(pair.true_positions_by_landmarks())
+                .map(|(a, b)| dist(a, &b))
+                .collect();
+            r.dense_by_landmarks = [
+                Summary::of(&by_landmarks),
+                labelled(pair, &by_landmarks, STERNUM_LABEL),
+            ];
             r.waypoint_errors = wps
                 .iter()
                 .zip(&pair.true_waypoints)
@@ -289,19 +302,23 @@ fn evaluate(m: EvalMethod, pair: &PhantomPair, variant: Variant, seed: u64) -> C
     r
 }
 
+/// The summary of the per-point dense errors `d` of `pair`'s template points labelled
+/// `label`.
+fn labelled(pair: &PhantomPair, d: &[f64], label: i32) -> Summary {
+    let v: Vec<f64> = d
+        .iter()
+        .zip(&pair.template.labels)
+        .filter(|(_, &l)| l == label)
+        .map(|(e, _)| *e)
+        .collect();
+    Summary::of(&v)
+}
+
 /// Per-point dense errors `d` of `pair`'s template by structure and along the cartilage.
 fn dense_breakdown(pair: &PhantomPair, d: &[f64]) -> (Vec<Summary>, Vec<f64>) {
     let by_structure = STRUCTURES
         .iter()
-        .map(|&(_, label)| {
-            let v: Vec<f64> = d
-                .iter()
-                .zip(&pair.template.labels)
-                .filter(|(_, &l)| l == label)
-                .map(|(e, _)| *e)
-                .collect();
-            Summary::of(&v)
-        })
+        .map(|&(_, label)| labelled(pair, d, label))
         .collect();
     let mut sum = [0.0; ALONG_BINS];
     let mut count = [0usize; ALONG_BINS];
@@ -815,20 +832,32 @@ fn breakdown(s: &mut String, cfg: &EvalConfig, results: &[CaseResult]) {
         "\n### {ours}: dense error by structure\n\nMean ± SD over pairs of each pair's mean, \
          and the largest pair mean (mm).\n\n| structure | {head} |\n{rule}"
     );
-    for (k, (name, _)) in STRUCTURES.iter().enumerate() {
+    // Mean ± SD over the accepted pairs of `of` each, and the largest, one cell a group.
+    let row = |s: &mut String, name: &str, of: &dyn Fn(&CaseResult) -> Option<f64>| {
         let cells: Vec<String> = groups
             .iter()
             .map(|&g| {
                 let m: Vec<f64> = rows(results, &ours, g)
                     .filter(|r| r.error.is_none())
-                    .filter_map(|r| r.dense_by_structure.get(k).map(|x| x.mean))
+                    .filter_map(of)
                     .collect();
                 let sum = Summary::of(&m);
                 format!("{:.2} ± {:.2} (max {:.1})", sum.mean, sum.sd, sum.max)
             })
             .collect();
         let _ = writeln!(s, "| {name} | {} |", cells.join(" | "));
+    };
+    for (k, (name, _)) in STRUCTURES.iter().enumerate() {
+        row(s, name, &|r| r.dense_by_structure.get(k).map(|x| x.mean));
     }
+    // The sternum and every point again, the sternum's truth by its landmarks (its ends
+    // and the rib attachments, `PhantomPair::true_positions_by_landmarks`).
+    row(s, "sternum, truth by its landmarks", &|r| {
+        Some(r.dense_by_landmarks[1].mean)
+    });
+    row(s, "all, the sternum's truth by its landmarks", &|r| {
+        Some(r.dense_by_landmarks[0].mean)
+    });
     let _ = writeln!(s);
 }
 

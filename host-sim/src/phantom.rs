@@ -677,6 +677,31 @@ impl PhantomPair {
             .collect()
     }
 
+    /// [`PhantomPair::true_positions`], but with each sternum point's truth at the same
+    /// share of the way between the same two of the sternum's landmarks (its ends and the
+    /// rib attachments, [`SubjectGeometry::sternum_s_by_landmarks`]) rather than at the
+    /// same share of its whole length: the correspondence of anatomy, where the hard
+    /// preset's manubrium and xiphoid vary apart from the ribs'. The cartilages' truth
+    /// is unchanged.
+    pub fn true_positions_by_landmarks(&self) -> Vec<[f64; 3]> {
+        let pg = SubjectGeometry::new(&self.patient_params);
+        let tg = SubjectGeometry::new(&self.template_params);
+        self.template
+            .material
+            .iter()
+            .map(|m| {
+                let m = match m.part {
+                    Part::Sternum => Material {
+                        s: pg.sternum_s_by_landmarks(&tg, m.s),
+                        ..*m
+                    },
+                    Part::Cartilage { .. } => *m,
+                };
+                self.pose.apply(pg.position(&m))
+            })
+            .collect()
+    }
+
     /// The template's labels as the core takes them (rib 2..=5, 1 sternum; any other
     /// value 0, none).
     pub fn core_labels(&self) -> Vec<u8> {

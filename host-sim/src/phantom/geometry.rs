@@ -73,6 +73,44 @@ impl SubjectGeometry {
         self.rib_height[rib_index(rib)]
     }
 
+    /// Heights (before the anisotropic scale, mm) of the sternum's landmarks, top to
+    /// bottom: its top end, the four rib attachments ([`SubjectGeometry::rib_height_mm`])
+    /// and its bottom end.
+    pub(super) fn sternum_landmarks(&self) -> [f64; RIB_COUNT + 2] {
+        let mut l = [self.sternum_top; RIB_COUNT + 2];
+        l[1..=RIB_COUNT].copy_from_slice(&self.rib_height);
+        l[RIB_COUNT + 1] = self.sternum_bottom;
+        l
+    }
+
+    /// The material s on this subject's sternum of the point at material s `s` of
+    /// `other`'s: the same share of the way between the same two landmarks
+    /// (its ends and the four rib attachments, [`SubjectGeometry::rib_height_mm`]), where
+    /// the material s itself is the share of the whole sternum's length. The two agree
+    /// when the sternum's parts keep their proportions; a manubrium or xiphoid longer
+    /// than `other`'s, beside the same ribs, shifts the body's points by up to tens of mm
+    /// in material s but not here (README "The sternum's ends").
+    pub fn sternum_s_by_landmarks(&self, other: &SubjectGeometry, s: f64) -> f64 {
+        let (from, to) = (other.sternum_landmarks(), self.sternum_landmarks());
+        let y = other.sternum_y(s.clamp(0.0, 1.0));
+        let k = (0..=RIB_COUNT)
+            .find(|&k| y >= from[k + 1])
+            .unwrap_or(RIB_COUNT);
+        let span = from[k] - from[k + 1];
+        let f = if span > 0.0 {
+            ((from[k] - y) / span).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let y_here = to[k] - f * (to[k] - to[k + 1]);
+        let length = self.sternum_top - self.sternum_bottom;
+        if length > 0.0 {
+            ((self.sternum_top - y_here) / length).clamp(0.0, 1.0)
+        } else {
+            s
+        }
+    }
+
     /// The material s at which a cartilage centreline crosses the sternum edge (u = 0).
     pub fn sternum_edge_s(&self, rib: u8, side: Side) -> f64 {
         let l = self.params.cartilage_length_mm[side.index()][rib_index(rib)];

@@ -192,6 +192,47 @@ fn phantom_true_position_identity_case() {
     }
 }
 
+/// The sternum's truth by its landmarks: the template's ends and rib attachments land on
+/// the patient's, the points between keep their share of the way, the same subject maps
+/// onto itself, and the cartilages' truth is the plain one.
+#[test]
+fn sternum_truth_by_landmarks_takes_landmarks_to_landmarks() {
+    let t = SubjectParams::template();
+    let tg = SubjectGeometry::new(&t);
+    let same = PhantomPair::generate_with(&t, &t, &coarse(3, Variant::Aligned));
+    assert_eq!(same.true_positions_by_landmarks(), same.true_positions());
+    for seed in [3, 11, 40] {
+        let p = SubjectParams::random_for(seed, Preset::Hard, &[]);
+        let pg = SubjectGeometry::new(&p);
+        let (from, to) = (tg.sternum_landmarks(), pg.sternum_landmarks());
+        let s_at =
+            |g: &SubjectGeometry, y: f64| (g.sternum_top - y) / (g.sternum_top - g.sternum_bottom);
+        for k in 0..from.len() {
+            let s = pg.sternum_s_by_landmarks(&tg, s_at(&tg, from[k]));
+            assert!(
+                (pg.sternum_y(s) - to[k]).abs() < 1e-9,
+                "seed {seed}, landmark {k}"
+            );
+        }
+        // Halfway between rib 3's and rib 4's attachments on both.
+        let mid = |l: &[f64]| 0.5 * (l[2] + l[3]);
+        let s = pg.sternum_s_by_landmarks(&tg, s_at(&tg, mid(&from)));
+        assert!((pg.sternum_y(s) - mid(&to)).abs() < 1e-9, "seed {seed}");
+        // Monotone: top to bottom stays top to bottom.
+        let ss: Vec<f64> = (0..=20)
+            .map(|i| pg.sternum_s_by_landmarks(&tg, f64::from(i) / 20.0))
+            .collect();
+        assert!(ss.windows(2).all(|w| w[0] <= w[1]), "{ss:?}");
+        let pair = PhantomPair::generate_with(&t, &p, &coarse(seed, Variant::Misaligned));
+        let (plain, anatomical) = (pair.true_positions(), pair.true_positions_by_landmarks());
+        for ((a, b), m) in plain.iter().zip(&anatomical).zip(&pair.template.material) {
+            if let Part::Cartilage { .. } = m.part {
+                assert_eq!(a, b);
+            }
+        }
+    }
+}
+
 #[test]
 fn phantom_poisson_min_distance() {
     let pts = &default_pair().template.points;
