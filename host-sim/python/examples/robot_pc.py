@@ -27,6 +27,7 @@ import sys
 import time
 from typing import Callable, Dict, List, Optional
 
+from ribreg import error_summary
 from ribreg.link import (
     Command,
     CommandKind,
@@ -120,10 +121,12 @@ def run(session: Session, scenario: Scenario, progress: Callable[[str], None]) -
         refused = session.refused
         if len(refused) > refused_before:
             seq, code, detail = refused[refused_before]
-            raise LinkError(
-                f"the controller refused message {seq} while executing: {code.value}"
-                + ("" if detail is None else f" (error code {detail})")
+            what = (
+                code.value
+                if detail is None
+                else f"content refused: {error_summary(detail)} (error code {detail})"
             )
+            raise LinkError(f"the controller refused message {seq} while executing: {what}")
         if time.monotonic() - start > TIMEOUT_S:
             raise LinkError("execution did not finish in time")
         session.advance(tick_us)
