@@ -320,8 +320,8 @@ mod tests {
     }
 
     /// The simulated robot's TCP, taken from its own matrix and slerped toward a target
-    /// at every setpoint, drifted off unit norm and diverged (README "Controller and
-    /// firmware"): both steps now stay rotations.
+    /// at every setpoint, drifted off unit norm and diverged (README "A robot pose that
+    /// stays a rotation"): both steps now stay rotations.
     #[test]
     fn poses_stay_rotations_off_orthonormal_input_and_close_slerps() {
         let p = pose(0.0, 3.0, 33.0);
