@@ -844,7 +844,7 @@ pub fn end_to_end(
         )?;
         if let Some(area) = imaged {
             let (edges, _) = check_edges(&o.registration, &o.reach, area, false)?;
-            least_clearance = edges.iter().flatten().fold(f32::NAN, |a, &b| a.min(b));
+            least_clearance = ribreg_core::registration::reach::least_clearance(&edges);
             progress(&format!(
                 "the sweep imaged at least {least_clearance:.1} mm past every rib end the \
                  {name} cloud shows"

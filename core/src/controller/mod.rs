@@ -66,7 +66,7 @@ use crate::limits::{MIN_CLOUD_POINTS, OUTBOX, SKELETON_POINTS, SOM1_CAPACITY, TR
 use crate::math::geom::Rigid;
 use crate::registration::local_rigid::{Lookup, TransformCache};
 use crate::registration::pipeline::{Registering, Registration, Template};
-use crate::registration::reach::{check_edges, cut_sides, edge_clearance};
+use crate::registration::reach::{check_edges, cut_sides, edge_clearance, least_clearance};
 
 use crate::acquisition::track::TrackedPose;
 use crate::wire::{
@@ -737,8 +737,7 @@ fn confidence(reg: &Registration, edges: [[f32; 2]; 4], waypoints: usize) -> Reg
         support_mm: c.map_or(f32::NAN, |c| c.support_mm),
         // `as` saturates: 0..=255 %.
         min_side_span_percent: (least * 100.0 + 0.5) as u8,
-        // NaN (a rib side not seen) is left out; none measured is NaN.
-        min_edge_clearance_mm: edges.iter().flatten().fold(f32::NAN, |a, &b| a.min(b)),
+        min_edge_clearance_mm: least_clearance(&edges),
         waypoints: waypoints as u8,
     }
 }

@@ -258,6 +258,12 @@ pub fn check_edges(clearances: &[[f32; 2]; 4]) -> Result<()> {
     }
 }
 
+/// The least of [`edge_clearances`]' `clearances`, mm: NaN (a rib side not seen) is
+/// left out, and none measured is NaN.
+pub fn least_clearance(clearances: &[[f32; 2]; 4]) -> f32 {
+    clearances.iter().flatten().fold(f32::NAN, |a, &b| a.min(b))
+}
+
 /// The sides (`[right, left]`) with a rib end below [`MIN_EDGE_CLEARANCE_MM`]: a partial
 /// plan drives to no waypoint there.
 pub fn cut_sides(clearances: &[[f32; 2]; 4]) -> [bool; 2] {
@@ -402,8 +408,11 @@ mod tests {
         c[1][0] = f32::NAN;
         assert_eq!(check_edges(&c), Ok(()));
         assert_eq!(cut_sides(&c), [false, false]);
+        assert_eq!(least_clearance(&c), 20.0);
+        assert!(least_clearance(&[[f32::NAN; 2]; 4]).is_nan());
         c[3][1] = 2.9;
         c[2][1] = 0.3;
+        assert_eq!(least_clearance(&c), 0.3);
         assert_eq!(
             check_edges(&c),
             Err(Error::SweepEdge {
