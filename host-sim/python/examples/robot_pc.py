@@ -25,7 +25,7 @@ import json
 import math
 import sys
 import time
-from typing import Callable, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from ribreg import error_summary
 from ribreg.link import (
@@ -48,7 +48,7 @@ from ribreg.sim import TOLERANCE_MM, Scenario
 TIMEOUT_S = 120.0
 
 
-def run(session: Session, scenario: Scenario, progress: Callable[[str], None]) -> Dict:
+def run(session: Session, scenario: Scenario, progress: Callable[[str], None]) -> Dict[str, Any]:
     """Runs the whole procedure on ``scenario`` through ``session``; returns the report
     (the fields of ``ribreg hil --json`` but the controller's costs and wall time in
     their own keys). Raises :class:`LinkError` when a stage does not complete."""
@@ -58,22 +58,22 @@ def run(session: Session, scenario: Scenario, progress: Callable[[str], None]) -
     # Handshake and upload.
     ack = session.handshake(TIMEOUT_S)
     progress(f"controller: protocol {ack.version}, frames up to {ack.max_frame} bytes")
-    for m in scenario.upload():
-        session.send(m)
+    for upload in scenario.upload():
+        session.send(upload)
     session.flush(TIMEOUT_S)
     progress(f"template uploaded: {scenario.nodes} nodes, {scenario.waypoints} waypoints")
 
     # Sweep: the controller's clock follows the poses' time stamps, 10 ms at a time.
     session.send(Command(CommandKind.START_SWEEP))
     msgs = scenario.sweep_messages()
-    n_poses = sum(1 for m in msgs if isinstance(m, Pose))
+    n_poses = sum(1 for s in msgs if isinstance(s, Pose))
     n_frames = len(msgs) - n_poses
     last_t = 0
-    for i, m in enumerate(msgs):
-        if isinstance(m, Pose) and m.t_us >= last_t + 10_000:
-            session.advance(min(max(m.t_us - last_t, 0), 10_000))
-            last_t = m.t_us
-        session.send(m)
+    for i, sent in enumerate(msgs):
+        if isinstance(sent, Pose) and sent.t_us >= last_t + 10_000:
+            session.advance(min(max(sent.t_us - last_t, 0), 10_000))
+            last_t = sent.t_us
+        session.send(sent)
         session.pump(0.0)
         if i % 20_000 == 0:
             progress(f"sweep: {i} of {len(msgs)} messages")
@@ -108,7 +108,7 @@ def run(session: Session, scenario: Scenario, progress: Callable[[str], None]) -
     session.send(Command(CommandKind.EXECUTE))
     robot.start_executing()
     current: Optional[int] = None
-    reached: List[Optional[tuple]] = [None] * scenario.waypoints
+    reached: List[Optional[Tuple[float, float, float]]] = [None] * scenario.waypoints
     start = time.monotonic()
     last_report = time.monotonic()
     done = False
@@ -209,7 +209,7 @@ def run(session: Session, scenario: Scenario, progress: Callable[[str], None]) -
     }
 
 
-def print_report(r: Dict) -> None:
+def print_report(r: Dict[str, Any]) -> None:
     """The per-waypoint table and the summary line, as ``ribreg hil`` prints them."""
     print("waypoint  mapped (x, y, z) mm               quality  probe error")
     for i, w in enumerate(r["waypoints"]):

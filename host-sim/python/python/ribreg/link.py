@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass, field, fields, is_dataclass
-from typing import Any, Dict, List, Optional, Tuple, Type, Union
+from typing import Any, Dict, List, Literal, Optional, Tuple, Type, Union, overload
 
 from . import _ribreg as _rs
 
@@ -428,8 +428,20 @@ def _unit_or_newtype(v: Any) -> Tuple[str, Optional[int]]:
     return v, None
 
 
+@overload
+def from_wire(wire: Union[Dict[str, Any], str], to_controller: Literal[True]) -> ToController: ...
+@overload
+def from_wire(
+    wire: Union[Dict[str, Any], str], to_controller: Literal[False] = ...
+) -> FromController: ...
+@overload
+def from_wire(wire: Union[Dict[str, Any], str], to_controller: bool) -> Message: ...
+
+
 def from_wire(wire: Union[Dict[str, Any], str], to_controller: bool = False) -> Message:
-    """The typed message of a serde form (``{"VariantName": body}``)."""
+    """The typed message of a serde form (``{"VariantName": body}``): a robot PC
+    message (:data:`ToController`) if ``to_controller``, else a controller message
+    (:data:`FromController`)."""
     if isinstance(wire, str):  # a variant without data
         wire = {wire: None}
     ((name, body),) = wire.items()
@@ -566,7 +578,7 @@ class Session:
         ``timeout=None`` only looks at the queue (call :meth:`pump` to fill it); a
         number pumps until a message arrives or that many seconds pass."""
         wire = self._s.next_message(timeout)
-        return None if wire is None else from_wire(wire)  # type: ignore[return-value]
+        return None if wire is None else from_wire(wire)
 
     def flush(self, timeout: float = 120.0) -> None:
         """Waits until every message sent is acknowledged or refused (advancing an

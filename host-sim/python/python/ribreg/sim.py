@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import List, Optional, Tuple
 
 from . import _ribreg as _rs
-from .link import Message, Pose, Session, Setpoint, from_wire
+from .link import Pose, Session, Setpoint, ToController, from_wire
 
 __all__ = ["Scenario", "Robot", "Emulator", "emulator_available", "STANDOFF_MM",
            "ROBOT_LAG_S", "TOLERANCE_MM"]
@@ -33,7 +33,10 @@ class Robot:
 
     def pose(self, t_us: int) -> Pose:
         """Its flange pose report stamped ``t_us``."""
-        return from_wire(self._r.pose(t_us), to_controller=True)  # type: ignore[return-value]
+        pose = from_wire(self._r.pose(t_us), to_controller=True)
+        if not isinstance(pose, Pose):
+            raise TypeError(f"the simulated robot reported {pose!r}, not a Pose")
+        return pose
 
     def start_executing(self) -> None:
         """Starts executing: the TCP is where the standing flange holds it."""
@@ -89,15 +92,15 @@ class Scenario:
     @property
     def true_waypoints(self) -> List[Tuple[float, float, float]]:
         """The phantom's true waypoints (robot base frame), mm."""
-        return [tuple(p) for p in self._s.true_waypoints]  # type: ignore[misc]
+        return [(p[0], p[1], p[2]) for p in self._s.true_waypoints]
 
-    def upload(self) -> List[Message]:
+    def upload(self) -> List[ToController]:
         """What follows the handshake, in order: :class:`~ribreg.link.Configure`, the
         :class:`~ribreg.link.TemplateNodes` chunks, :class:`~ribreg.link.TemplateShape`,
         the :class:`~ribreg.link.Waypoints` chunks."""
         return [from_wire(w, to_controller=True) for w in self._s.upload()]
 
-    def sweep_messages(self) -> List[Message]:
+    def sweep_messages(self) -> List[ToController]:
         """The sweep's :class:`~ribreg.link.Pose` (100 Hz) and
         :class:`~ribreg.link.Frame` (30 fps) messages in arrival order."""
         return [from_wire(w, to_controller=True) for w in self._s.sweep_messages()]
