@@ -304,6 +304,19 @@ pub enum Error {
         /// Least accepted, tenths of a mm.
         min_dmm: u16,
     },
+    /// A rib's two sides meet the sternum at different heights in the target (guided
+    /// model; see [`crate::registration::guided::check_levels`]): cartilages join the
+    /// sternum in pairs at one level, so the registration took one side's cartilages for
+    /// the next rib's, and that side's waypoints would land a gap off.
+    RibLevels {
+        /// Rib number 2..=5.
+        rib: u8,
+        /// How far apart in height its two sides meet the sternum, against the
+        /// template's, tenths of a mm (saturated).
+        step_dmm: u16,
+        /// Largest accepted, tenths of a mm.
+        max_dmm: u16,
+    },
 }
 
 impl fmt::Display for Cloud {
@@ -532,6 +545,18 @@ impl fmt::Display for Error {
                      ends and register again, or map only the other side (a partial plan)",
                     mm(clearance_dmm),
                     mm(min_dmm)
+                )
+            }
+            Error::RibLevels { rib, step_dmm, max_dmm } => {
+                let mm = |d: u16| f32::from(d) / 10.0;
+                write!(
+                    f,
+                    "rib {rib}'s two sides meet the sternum {:.1} mm apart in height, against \
+                     the template's (at most {:.1} mm accepted): the registration took one \
+                     side's cartilages for the next rib's; scan both sides, ribs 2 to 5, from \
+                     the sternum out and register again",
+                    mm(step_dmm),
+                    mm(max_dmm)
                 )
             }
             Error::Unsupported {

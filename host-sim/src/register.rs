@@ -543,7 +543,7 @@ impl Mapped {
                 "rotation": rows(&reg.pose.rotation),
                 "translation": reg.pose.translation.as_slice(),
             },
-            "coverage": coverage_json(&reg),
+            "coverage": coverage_json(&tpl, &reg),
             "pose_hypotheses": confidence_json(&reg),
             "waypoint_reach": reach_json(&reach, cut),
             "metrics": {
@@ -666,8 +666,10 @@ fn reach_json(reach: &[Option<WaypointReach>], cut: [bool; 2]) -> Value {
 }
 
 /// Guided model: each rib side's span as a share of the template's, and the least
-/// accepted (`guided::check_coverage`); `null` for the graph model.
-fn coverage_json(reg: &Registration) -> Value {
+/// accepted (`guided::check_coverage`); how far apart in height each rib's two sides
+/// meet the sternum, against the template's (`guided::check_levels`); `null` for the
+/// graph model.
+fn coverage_json(tpl: &Template, reg: &Registration) -> Value {
     let Some(spans) = reg.coverage else {
         return Value::Null;
     };
@@ -679,9 +681,22 @@ fn coverage_json(reg: &Registration) -> Value {
     let m = guided::ShareMeans::of(&spans);
     // JSON has no NaN: a rib side not seen makes a mean `null`.
     let finite = |v: f32| v.is_finite().then_some(v);
+    let levels = guided::rib_levels(
+        &reg.skeleton.points,
+        &reg.pose,
+        &tpl.skeleton.points,
+        &tpl.midline_fraction,
+    );
+    let levels: Vec<Value> = RIBS
+        .iter()
+        .zip(levels)
+        .map(|(rib, level)| json!({ "rib": rib, "left_above_right_mm": level }))
+        .collect();
     json!({
         "min_side_span": guided::MIN_SIDE_SPAN,
         "side_spans": ribs,
+        "rib_levels": levels,
+        "max_rib_level_mm": guided::MAX_RIB_LEVEL_MM,
         "means": {
             "right": finite(m.right),
             "left": finite(m.left),

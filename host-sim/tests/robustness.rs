@@ -6,7 +6,9 @@
 use ribreg_core::error::Cloud;
 use ribreg_core::Error;
 use ribreg_sim::eval::robustness::{Case, SILENT_FAILURE_MM};
-use ribreg_sim::phantom::{Material, Part, PhantomConfig, PhantomPair, Preset, Side, Variant};
+use ribreg_sim::phantom::{
+    HardPart, Material, Part, PhantomConfig, PhantomPair, Preset, Side, Variant,
+};
 use ribreg_sim::register::{register_clouds, to_core, Method, Options};
 
 /// The improved method on `pair`: the largest waypoint error, or the core's refusal.
@@ -624,4 +626,39 @@ fn core_side(side: Side) -> ribreg_core::error::Side {
         Side::Left => ribreg_core::error::Side::Left,
         Side::Right => ribreg_core::error::Side::Right,
     }
+}
+
+/// A side taken for the next rib: hard phantom 4 without its tip holes, misaligned,
+/// ended in a pose about 2° about the anterior axis from the aligned run's, whose
+/// labels put the left side's cartilages a rib off (rib 2 there unlabelled, rib 3
+/// labelled 2). Margin (1.64), support (6.1 mm), coverage and sides all passed: the
+/// waypoints of that side came out 14–35 mm off, a silent failure. Its ribs 2 and 3 meet
+/// the sternum 8.6 and 7.9 mm apart in height (`guided::rib_levels`; right runs stay
+/// within 3.1 mm): refused, naming rib 2. The aligned run of the same patient and sweep
+/// is registered within 5 mm.
+#[test]
+fn a_side_taken_for_the_next_rib_is_refused_not_mapped() {
+    let phantom = |variant| {
+        PhantomPair::generate(&PhantomConfig {
+            seed: 4,
+            preset: Preset::Hard,
+            variant,
+            hard_without: vec![HardPart::TipHoles],
+            ..PhantomConfig::default()
+        })
+    };
+    let e = run(&phantom(Variant::Misaligned)).expect_err("one side a rib off");
+    assert!(
+        matches!(
+            e,
+            Error::RibLevels {
+                rib: 2,
+                step_dmm: 60..,
+                max_dmm: 50
+            }
+        ),
+        "{e}"
+    );
+    let worst = run(&phantom(Variant::Aligned)).expect("the aligned run");
+    assert!(worst < 5.0, "aligned: {worst:.1} mm");
 }

@@ -962,11 +962,11 @@ fn error_codes_have_summaries() {
     use ribreg_core::acquisition::track::TrackedPose;
     use ribreg_core::error::Side;
     use ribreg_core::{Error, Vec3};
-    for code in 1..=27 {
+    for code in 1..=28 {
         assert_ne!(wire::error_summary(code), "unknown error", "code {code}");
     }
     assert_eq!(wire::error_summary(0), "unknown error");
-    assert_eq!(wire::error_summary(28), "unknown error");
+    assert_eq!(wire::error_summary(29), "unknown error");
     let not_seen = Error::NotSeen {
         rib: 5,
         side: Side::Right,
@@ -1021,6 +1021,19 @@ fn error_codes_have_summaries() {
          1.2 mm beyond the end the sweep shows (at least 3.0 mm is needed), so the cartilage \
          may go on; scan that side past the cartilages' ends and register again, or map only \
          the other side (a partial plan)"
+    );
+    let levels = Error::RibLevels {
+        rib: 2,
+        step_dmm: 86,
+        max_dmm: 50,
+    };
+    assert_eq!(wire::error_code(&levels), 28);
+    assert!(wire::error_summary(28).contains("different heights"));
+    assert_eq!(
+        levels.to_string(),
+        "rib 2's two sides meet the sternum 8.6 mm apart in height, against the template's \
+         (at most 5.0 mm accepted): the registration took one side's cartilages for the next \
+         rib's; scan both sides, ribs 2 to 5, from the sternum out and register again"
     );
     let fault = wire::Fault::Registration(wire::error_code(&not_seen));
     assert_eq!(

@@ -10,8 +10,8 @@ use crate::math::geom::{nearest, validate, validate_count, validate_points, Fram
 use crate::math::spline::{ThinPlate, ThinPlateFit};
 use crate::registration::endpoints::{match_endpoints, EndpointMatch};
 use crate::registration::guided::{
-    check_coverage, check_sides, fit_ribs, label_nodes, sternum_stations, GuidedStage, NodeLabels,
-    PoseConfidence, TargetSkeleton,
+    check_coverage, check_levels, check_sides, fit_ribs, label_nodes, rib_levels, sternum_stations,
+    GuidedStage, NodeLabels, PoseConfidence, TargetSkeleton,
 };
 use crate::registration::local_rigid::{LocalRigid, TransformCache};
 use crate::registration::skeleton::{GraphBuild, RibEnds, RibSkeleton, SkeletonGraph};
@@ -499,6 +499,13 @@ impl Registering {
             None => check_coverage(&coverage)?,
         }
         check_sides(&coverage)?;
+        let levels = rib_levels(
+            &points,
+            &pose,
+            &template.skeleton.points,
+            &template.midline_fraction,
+        );
+        check_levels(&levels)?;
         let skeleton = RibSkeleton {
             points,
             paths: Default::default(),

@@ -459,6 +459,10 @@ pub fn error_summary(code: u8) -> &'static str {
             "a rib runs to the edge of the sweep (scan that side past the cartilages' ends \
                and register again, or configure a partial plan)"
         }
+        28 => {
+            "a rib's two sides meet the sternum at different heights: one side was taken \
+               for the next rib (scan both sides and register again)"
+        }
         _ => "unknown error",
     }
 }
@@ -524,5 +528,6 @@ pub fn error_code(e: &crate::error::Error) -> u8 {
         E::SideShort { .. } => 25,
         E::SweepShort { .. } => 26,
         E::SweepEdge { .. } => 27,
+        E::RibLevels { .. } => 28,
     }
 }
