@@ -20,7 +20,8 @@ pub const KEY_POINTS: usize = 128;
 /// Paired skeleton points: 6 + 6 + 8 + 10.
 pub const SKELETON_POINTS: usize = 30;
 /// Points on the sternum's midline paired between template and target (guided model):
-/// the manubrium's top, the xiphoid's tip and two between.
+/// the xiphoid's tip, where ribs 5 and 2 join, and the manubrium's top
+/// ([`crate::registration::guided::stations_at_attachments`]).
 pub const STERNUM_STATIONS: usize = 4;
 /// Most point pairs a thin-plate spline takes: the skeleton and the sternum stations.
 pub const SPLINE_POINTS: usize = SKELETON_POINTS + STERNUM_STATIONS;

@@ -16,9 +16,11 @@ fn dist(a: &ribreg_core::Vec3, b: &[f64; 3]) -> f64 {
         .sqrt()
 }
 
-/// Mean waypoint error, mean dense error of the sternum's points and worst waypoint
-/// error, mm, of the improved method (without the step `without`) on the phantom pair
-/// `seed` of `preset`; `None` if it refuses the pair.
+/// Mean waypoint error, mean dense error of the sternum's points (each against its truth
+/// by the sternum's landmarks, `PhantomPair::true_positions_by_landmarks`: the stations
+/// pair the ribs' attachments) and worst waypoint error, mm, of the improved method
+/// (without the step `without`) on the phantom pair `seed` of `preset`; `None` if it
+/// refuses the pair.
 fn errors(preset: Preset, seed: u64, without: Option<Ablation>) -> Option<(f64, f64, f64)> {
     let pair = PhantomPair::generate(&PhantomConfig {
         seed,
@@ -40,7 +42,7 @@ fn errors(preset: Preset, seed: u64, without: Option<Ablation>) -> Option<(f64, 
         .zip(&pair.true_waypoints)
         .map(|(a, b)| dist(a, b))
         .collect();
-    let truth = pair.true_positions();
+    let truth = pair.true_positions_by_landmarks();
     let sternum: Vec<f64> = o
         .registered
         .iter()

@@ -10,8 +10,9 @@ use crate::math::geom::{nearest, validate, validate_count, validate_points, Fram
 use crate::math::spline::{ThinPlate, ThinPlateFit};
 use crate::registration::endpoints::{match_endpoints, EndpointMatch};
 use crate::registration::guided::{
-    check_coverage, check_levels, check_sides, fit_ribs, label_nodes, rib_levels, sternum_stations,
-    GuidedStage, NodeLabels, PoseConfidence, TargetSkeleton,
+    check_coverage, check_levels, check_sides, fit_ribs, label_nodes, rib_levels,
+    stations_at_attachments, sternum_stations, GuidedStage, NodeLabels, PoseConfidence,
+    TargetSkeleton,
 };
 use crate::registration::local_rigid::{LocalRigid, TransformCache};
 use crate::registration::skeleton::{GraphBuild, RibEnds, RibSkeleton, SkeletonGraph};
@@ -582,6 +583,13 @@ fn spline_pairs(
     );
     match (own, reg.sternum) {
         (Some(s), Some(t)) => {
+            let (s, t) = stations_at_attachments(
+                &s,
+                &template.skeleton.points,
+                &t,
+                &reg.skeleton.points,
+                &template.midline_fraction,
+            );
             source[SKELETON_POINTS..].copy_from_slice(&s);
             target[SKELETON_POINTS..].copy_from_slice(&t);
             (source, target, SPLINE_POINTS)
