@@ -1136,7 +1136,7 @@ pub fn check_sides(shares: &[[f32; 2]; 4]) -> Result<()> {
 /// the patient's size, slopes or asymmetry: on every registration of the phantoms that
 /// came out right the difference stays within 3.1 mm (throwaway probe of
 /// `register_clouds`, 2 × 200 seeds per preset, hard with and without tip holes:
-/// 1,564 runs, median 0.9, 99th percentile 1.8–2.3). When one side's cartilages are
+/// 1,164 runs, median 0.8–0.9, 99th percentile 1.8–2.3). When one side's cartilages are
 /// labelled a rib off (a pose hypothesis a few degrees about the anterior axis from the
 /// right one, which the guided rounds then keep), the cubic through the rib's points
 /// steps between the sides: hard phantom 4 without its tip holes, misaligned, 7.9 and
