@@ -15,8 +15,8 @@
 //! 1. a rigid pose target → template: the key-point ICP of
 //!    [`crate::registration::endpoints::CoarsePose`] from nine starts (no initial
 //!    alignment needed) keeps its best [`CANDIDATES`] distinct poses; each is refined by
-//!    ICP of all target SOM-1 nodes onto the template's, and so is the best pose so far
-//!    turned by each of [`TURNS_DEG`] in turn about the template's anterior axis; the
+//!    ICP of all target SOM-1 nodes onto the template's, and so is each one's best pose
+//!    so far turned by each of its [`TURNS`] in turn about the template's anterior axis; the
 //!    lowest refined RMS wins ([`PoseConfidence`]: a flipped pose pairs the nodes with
 //!    the wrong cartilage, and its residual stays well above the right one's);
 //! 2. the template nodes are carried into the target frame (first by that pose, in later
@@ -124,8 +124,11 @@ pub const MAX_CHECKED_SUPPORT_MM: f32 = 6.5;
 /// the right one's 3.6 mm); 1.0 would be a coin toss. 1.25 refuses a pose that a flip
 /// fits within a quarter of the residual.
 pub const MIN_POSE_MARGIN: f32 = 1.25;
-/// Turns (degrees) about the template's anterior axis of the best refined coarse
-/// hypothesis, each refined as a hypothesis of its own. The cartilages are near-parallel
+/// Turns about the template's anterior axis, `(line, degrees)`, each refined as a
+/// hypothesis of its own. A *line* is a coarse hypothesis ([`CANDIDATES`]) refined,
+/// and the turns of it; line 0 is the one whose coarse hypothesis refined to the lower
+/// residual, and each turn starts from its line's best pose so far.
+/// The cartilages are near-parallel
 /// curves in the chest's plane, so ICP has shallow minima a few degrees apart about the
 /// anterior axis: on hard phantoms the principal-axis starts ended 9–16° off there
 /// (waypoints 34–40 mm off, refused as a rib not seen or as ambiguous), and only the
@@ -148,8 +151,8 @@ pub const MIN_POSE_MARGIN: f32 = 1.25;
 /// turn costs the controller up to ~5 M instructions, one that heads back to the pose it
 /// turned far less ([`RETURNING_DEG`]).
 ///
-/// Each turn starts from the best pose refined so far, a turn's among them, so the turns
-/// walk downhill: hard phantom 21, turned by any yaw or rotation, ended in a minimum 3°
+/// Each turn starts from the best pose refined so far (of its line), a turn's among them,
+/// so the turns walk downhill: hard phantom 21, turned by any yaw or rotation, ended in a minimum 3°
 /// (mostly about the cranial axis) from the unturned sweep's (node residual 6.38 mm
 /// against 4.67; waypoints 10.4 mm off, accepted: a silent failure at 20 poses), because
 /// its +12° turn found a better minimum and the ±4° turns still started from the coarse
@@ -159,7 +162,28 @@ pub const MIN_POSE_MARGIN: f32 = 1.25;
 /// 123; `eval --preset both --ours-only --pairs 50` unchanged but for 0.001–0.002 mm
 /// (hard). Repeating the ±4° pair from a pose it improved changed one run of these
 /// (phantom 28 at yaw 45°, 5.2 → 4.8 mm).
-pub const TURNS_DEG: [f32; 4] = [-12.0, 12.0, -4.0, 4.0];
+///
+/// Line 1 (the other coarse hypothesis) is turned ±12° too: the right pose can lie a
+/// turn away from the hypothesis that refines worse. Hard phantom 153 turned by 45°
+/// refined to a flip (9.58 mm) and to a pose 13° off the right one (9.62 mm); the turns
+/// of the flip stayed flips, and the +12° turn of the other reaches the right pose
+/// (7.30 mm, as unturned). Hard phantom 117 turned by 45° likewise (8.24 mm against the
+/// flip's 8.77). `eval --robustness --preset hard --ours-only --pairs 100 [--first-seed
+/// 100]` (README, "Turning the other pose hypothesis too"): refusals of complete runs
+/// 219 → 195 of 4,996, silent failures of incomplete runs 60 → 56, complete ones
+/// unchanged (73); phantom 121, accepted at 11 of 12 poses before, is refused at all of
+/// them (the flip's line reaches 9.7 mm against the right pose's 7.9: a margin of 1.23,
+/// [`MIN_POSE_MARGIN`]). Turning line 1 by ±4° as well refused 3 more runs (phantoms
+/// 121 and 125) and cost the controller 2 M more instructions; the two turns cost it
+/// 9.5 M (`hil --quick`, MPS2: 131.7 → 141.2 M).
+pub const TURNS: [(usize, f32); 6] = [
+    (0, -12.0),
+    (0, 12.0),
+    (0, -4.0),
+    (0, 4.0),
+    (1, -12.0),
+    (1, 12.0),
+];
 /// A turn whose refined pose ends within this of the pose it turned found the same
 /// minimum and is dropped, degrees: the minima a turn is for lie 9–16° apart, and on
 /// the controller's compounded sweeps (`hil --in-process`, seeds 0–9, full and quick)
@@ -175,7 +199,32 @@ pub const SAME_MINIMUM_DEG: f32 = 3.0;
 /// ±4° added, 137.8 M with both and this stop; the waypoints are unchanged.
 pub const RETURNING_DEG: f32 = 1.5;
 /// Hypotheses refined: the coarse ones and the turns.
-pub const REFINED: usize = CANDIDATES + TURNS_DEG.len();
+pub const REFINED: usize = CANDIDATES + TURNS.len();
+
+/// The pose that hypothesis `h` of `refined` turns ([`TURNS`]): the lowest-residual one
+/// so far of its line (a coarse hypothesis refined, and its turns before `h`); `None`
+/// for a coarse hypothesis, or a line with no pose. The lines are ranked by their
+/// coarse hypotheses' refined residuals, lowest first, so that line 0's turns start
+/// where the best pose refined so far is.
+fn turn_base(refined: &[Option<(Rigid, f32)>], h: usize) -> Option<Rigid> {
+    let rms = |r: &Option<(Rigid, f32)>| match r {
+        Some((_, r)) if !r.is_nan() => *r,
+        _ => f32::INFINITY,
+    };
+    let &(rank, _) = TURNS.get(h.checked_sub(CANDIDATES)?)?;
+    let heads = refined.get(..CANDIDATES)?;
+    let mut order: [usize; CANDIDATES] = core::array::from_fn(|i| i);
+    order.sort_unstable_by(|&a, &b| rms(&heads[a]).total_cmp(&rms(&heads[b])).then(a.cmp(&b)));
+    let line = *order.get(rank)?;
+    let turns = TURNS.iter().zip(refined.get(CANDIDATES..h)?);
+    let own = turns.filter(|((r, _), _)| *r == rank).map(|(_, p)| p);
+    heads[line..=line]
+        .iter()
+        .chain(own)
+        .filter(|p| p.is_some())
+        .min_by(|a, b| rms(a).total_cmp(&rms(b)))
+        .and_then(|p| p.map(|(pose, _)| pose))
+}
 
 /// `pose` (target → template) followed by a turn of `deg` about the template's anterior
 /// axis (+z) through `centre`.
@@ -1644,10 +1693,7 @@ impl TargetSkeleton {
                 )?;
                 let h = usize::from(self.hypothesis);
                 // The pose a turn turned (none for the coarse hypotheses).
-                let base = (h >= CANDIDATES)
-                    .then(|| PoseConfidence::choose(&self.refined[..h]))
-                    .flatten()
-                    .map(|(base, _)| base);
+                let base = turn_base(&self.refined, h);
                 // A turn back within RETURNING_DEG of it is heading for its minimum: stopped.
                 let returning = self.icp.fitted()
                     && base.is_some_and(|b| !apart(&self.icp.pose(), &b, RETURNING_DEG));
@@ -1664,18 +1710,20 @@ impl TargetSkeleton {
                         self.icp = Icp::new(next);
                         return Ok(false);
                     }
-                    // The coarse hypotheses are done: the best pose so far (a turn's
-                    // among them) turned about the template's anterior axis, one turn
-                    // per hypothesis.
-                    let h = usize::from(self.hypothesis).max(CANDIDATES);
-                    self.hypothesis = h as u8;
-                    if let Some(&deg) = TURNS_DEG.get(h - CANDIDATES) {
-                        let (best, _) =
-                            PoseConfidence::choose(&self.refined[..h]).ok_or(Error::RigidFit)?;
-                        self.icp =
-                            Icp::new(turn_about_anterior(&best, deg, &template.frame.origin));
-                        return Ok(false);
+                    // The coarse hypotheses are done: each line's best pose so far (a
+                    // turn's among them) turned about the template's anterior axis, one
+                    // turn per hypothesis; a line without a pose is not turned.
+                    let mut h = usize::from(self.hypothesis).max(CANDIDATES);
+                    while let Some(&(_, deg)) = TURNS.get(h - CANDIDATES) {
+                        if let Some(base) = turn_base(&self.refined, h) {
+                            self.hypothesis = h as u8;
+                            self.icp =
+                                Icp::new(turn_about_anterior(&base, deg, &template.frame.origin));
+                            return Ok(false);
+                        }
+                        h += 1;
                     }
+                    self.hypothesis = h as u8;
                     let (pose, confidence) =
                         PoseConfidence::choose(&self.refined).ok_or(Error::RigidFit)?;
                     self.confidence = Some(confidence);
@@ -1863,6 +1911,47 @@ impl TargetSkeleton {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A pose told apart by its translation's x.
+    fn pose(x: f32) -> Rigid {
+        Rigid {
+            rotation: nalgebra::Matrix3::identity(),
+            translation: Vec3::new(x, 0.0, 0.0),
+        }
+    }
+
+    #[test]
+    fn each_turn_starts_from_its_line_s_best_pose_so_far() {
+        let base = |refined: &[Option<(Rigid, f32)>; REFINED], h| {
+            turn_base(refined, h).map(|p| p.translation.x)
+        };
+        // Coarse hypothesis 1 refined lower than 0: it is line 0.
+        let mut refined = [None; REFINED];
+        refined[0] = Some((pose(0.0), 5.0));
+        refined[1] = Some((pose(1.0), 4.0));
+        assert_eq!(base(&refined, 0), None, "a coarse hypothesis turns nothing");
+        assert_eq!(base(&refined, CANDIDATES), Some(1.0));
+        // A turn of line 0 that went lower is where line 0's next turn starts.
+        refined[CANDIDATES] = Some((pose(2.0), 3.0));
+        refined[CANDIDATES + 1] = Some((pose(3.0), 3.5));
+        assert_eq!(base(&refined, CANDIDATES + 2), Some(2.0));
+        // Line 1's turns start from its own coarse hypothesis, however low line 0 went.
+        let first_of_line_1 = TURNS.iter().position(|&(line, _)| line == 1);
+        let h = CANDIDATES + first_of_line_1.expect("line 1 is turned");
+        assert_eq!(base(&refined, h), Some(0.0));
+        refined[h] = Some((pose(4.0), 4.5));
+        assert_eq!(base(&refined, h + 1), Some(4.0));
+        // A coarse hypothesis with a NaN residual ranks last.
+        refined = [None; REFINED];
+        refined[0] = Some((pose(0.0), f32::NAN));
+        refined[1] = Some((pose(1.0), 9.0));
+        assert_eq!(base(&refined, CANDIDATES), Some(1.0));
+        // With neither residual a number, the lines keep their order; a line with no
+        // pose is not turned.
+        refined[1] = None;
+        assert_eq!(base(&refined, CANDIDATES), Some(0.0));
+        assert_eq!(base(&refined, h), None);
+    }
 
     #[test]
     fn sternum_stations_span_the_sternum_nodes_in_the_fitting_frame() {
