@@ -234,11 +234,13 @@ fn a_sweep_whose_axes_lie_between_the_quarter_turns_comes_out_as_unturned() {
     }
 }
 
-/// Hard phantoms 117 and 153: unturned, the identity start finds the right pose; turned,
-/// the better-refined coarse hypothesis was a flip whose turns stayed flips, and the
-/// other ended 13° off the right pose, which only its own +12° turn reaches. Every
-/// turned sweep but yaw 0° was refused ("rib 5 not seen", "target rib 2: 0 skeleton
-/// points"); this test fails with only the better hypothesis turned
+/// Hard phantoms 117 and 153: unturned, the identity start finds the right pose. Turned,
+/// 153's better-refined coarse hypothesis was a flip whose turns stayed flips, and the
+/// other ended 13° off the right pose, which only its own −12° turn reaches; 117's
+/// better one labelled a rib side away, and its turns into the right minimum, 2° off,
+/// were dropped as the same minimum, which the other's turn keeps. Every turned sweep
+/// but yaw 0° was refused ("rib 5 not seen", "rib 2 not seen"); this test fails with
+/// only the better hypothesis turned
 /// (`guided::TURNS`; README "Turning the other pose hypothesis too").
 #[test]
 fn the_other_pose_hypothesis_is_turned_too() {
