@@ -127,18 +127,17 @@ pub const MIN_POSE_MARGIN: f32 = 1.25;
 /// Turns about the template's anterior axis, `(line, degrees)`, each refined as a
 /// hypothesis of its own. A *line* is a coarse hypothesis ([`CANDIDATES`]) refined,
 /// and the turns of it; line 0 is the one whose coarse hypothesis refined to the lower
-/// residual, and each turn starts from its line's best pose so far.
-/// The cartilages are near-parallel
-/// curves in the chest's plane, so ICP has shallow minima a few degrees apart about the
-/// anterior axis: on hard phantoms the principal-axis starts ended 9–16° off there
-/// (waypoints 34–40 mm off, refused as a rib not seen or as ambiguous), and only the
-/// identity start, near the truth on an unturned sweep, found the right one. ±12° reaches
-/// it on the three phantoms checked (5, 7 and 12 turned by 45°); `eval --robustness
-/// --preset hard --ours-only --pairs 20`: refusals of complete sweeps 211 → 90 of 520.
-/// A turn that comes back to the minimum it left is
-/// dropped ([`SAME_MINIMUM_DEG`]): its residual differs from the first one's only by the
-/// ICP's last pairing, and taking it moved the controller's compounded sweeps' waypoints
-/// by up to 1.8 mm, worse on average.
+/// residual, and each turn starts from its line's best pose so far. The cartilages are
+/// near-parallel curves in the chest's plane, so ICP has shallow minima a few degrees
+/// apart about the anterior axis: on hard phantoms the principal-axis starts ended
+/// 9–16° off there (waypoints 34–40 mm off, refused as a rib not seen or as ambiguous),
+/// and only the identity start, near the truth on an unturned sweep, found the right
+/// one. ±12° reaches it on the three phantoms checked (5, 7 and 12 turned by 45°);
+/// `eval --robustness --preset hard --ours-only --pairs 20`: refusals of complete sweeps
+/// 211 → 90 of 520. A turn that comes back to the minimum it left is dropped
+/// ([`SAME_MINIMUM_DEG`]): its residual differs from the first one's only by the ICP's
+/// last pairing, and taking it moved the controller's compounded sweeps' waypoints by up
+/// to 1.8 mm, worse on average.
 ///
 /// ±4°: minima lie nearer too. Hard phantom 31, turned by any of the sweep's yaws or
 /// rotations, ended in a minimum 3.3° about the anterior axis from the unturned sweep's
@@ -152,8 +151,8 @@ pub const MIN_POSE_MARGIN: f32 = 1.25;
 /// turned far less ([`RETURNING_DEG`]).
 ///
 /// Each turn starts from the best pose refined so far (of its line), a turn's among them,
-/// so the turns walk downhill: hard phantom 21, turned by any yaw or rotation, ended in a minimum 3°
-/// (mostly about the cranial axis) from the unturned sweep's (node residual 6.38 mm
+/// so the turns walk downhill: hard phantom 21, turned by any yaw or rotation, ended in a
+/// minimum 3° (mostly about the cranial axis) from the unturned sweep's (node residual 6.38 mm
 /// against 4.67; waypoints 10.4 mm off, accepted: a silent failure at 20 poses), because
 /// its +12° turn found a better minimum and the ±4° turns still started from the coarse
 /// pose; from the +12° turn's pose a +4° turn reaches 4.99 mm, 0.6° from the unturned
@@ -170,8 +169,9 @@ pub const MIN_POSE_MARGIN: f32 = 1.25;
 /// (7.32 mm; unturned 7.30). Hard phantom 117 turned by 45°: line 0 refined to a pose
 /// that labels a rib side away (8.77 mm), and its turns into a lower minimum 2° away
 /// (8.23 mm) are dropped as the same minimum ([`SAME_MINIMUM_DEG`]); line 1's −12° turn
-/// comes from 10° away and keeps it (8.24 mm). `eval --robustness --preset hard --ours-only --pairs 100 [--first-seed
-/// 100]` (README, "Turning the other pose hypothesis too"): refusals of complete runs
+/// comes from 10° away and keeps it (8.24 mm). `eval --robustness --preset hard
+/// --ours-only --pairs 100 [--first-seed 100]` (README, "Turning the other pose
+/// hypothesis too"): refusals of complete runs
 /// 219 → 195 of 4,996, silent failures of incomplete runs 60 → 56, complete ones
 /// unchanged (73); phantom 121, accepted at 11 of 12 poses before, is refused at all of
 /// them (the flip's line reaches 9.7 mm against the right pose's 7.9: a margin of 1.23,
