@@ -37,7 +37,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::CliError;
 use crate::io::{self, Cloud, IoError, PlyFormat};
-use crate::phantom::{HardPart, PhantomConfig, PhantomPair, Pose, SubjectGeometry, MESH_EDGE_MM};
+use crate::phantom::{
+    HardPart, PhantomConfig, PhantomPair, Pose, SubjectGeometry, SubjectParams, MESH_EDGE_MM,
+};
 
 pub mod plus;
 pub(crate) mod sim;
@@ -617,6 +619,34 @@ pub struct SweepLogs {
     pub calib_captured: Vec<plus::CapturedFrame>,
     /// Summary for `sweep.json`.
     pub summary: serde_json::Value,
+}
+
+/// The chest's (x, y) extent in the frame of `patient`, mm (`[lo, hi]`, lateral then
+/// cranio-caudal): what the simulated sweep's lines span before
+/// [`SweepConfig::margin_mm`].
+pub fn chest_extent(patient: &SubjectParams) -> [[f64; 2]; 2] {
+    let (lo, hi) = sim::extent(&SubjectGeometry::new(patient).mesh(MESH_EDGE_MM));
+    [lo, hi]
+}
+
+/// The lines the default sweep ([`SweepConfig::default`], [`default_calibration`]) images
+/// when it runs laterally from `x[0]` to `x[1]` over cranio-caudal `y` (patient frame of
+/// `patient`, mm) with the robot base at `base_t_patient`: what `compound --imaged` would
+/// write for a sweep of that band (robot base frame), without rendering it.
+pub fn imaged_band(
+    patient: &SubjectParams,
+    x: [f64; 2],
+    y: [f64; 2],
+    base_t_patient: &Pose,
+) -> ImagedArea<IMAGED_LINES> {
+    sim::imaged(
+        &SweepConfig::default(),
+        &default_calibration(),
+        patient,
+        x,
+        y,
+        &sim::pose_isometry(base_t_patient),
+    )
 }
 
 /// Seed stream of the sweep simulation (distinct from the phantom's streams).

@@ -17,7 +17,10 @@
 //! `τ + lag + jitter` by the video clock (positive lag: the video lags the tracker).
 
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use ribreg_core::acquisition::imaged::ImagedArea;
 use ribreg_core::acquisition::probe::Calibration;
+use ribreg_core::limits::IMAGED_LINES;
+use ribreg_core::math::geom::Rigid;
 use ribreg_core::math::rng::Rng;
 
 use super::plus::CapturedFrame;
@@ -113,6 +116,13 @@ impl ScanPath {
             length.push(length.last().copied().unwrap_or(0.0) + d);
         }
         ScanPath { corners, length }
+    }
+
+    /// The scan's lines: along x from `x[0]` to `x[1]`, from half a line spacing above
+    /// `y[1]` down to half one below `y[0]` (patient frame, mm).
+    fn over(cfg: &SweepConfig, x: [f64; 2], y: [f64; 2]) -> ScanPath {
+        let half = 0.5 * cfg.line_spacing_mm;
+        ScanPath::serpentine(x[0], x[1], y[1] + half, y[0] - half, cfg.line_spacing_mm)
     }
 
     fn total(&self) -> f64 {
@@ -319,8 +329,46 @@ impl<'a> Renderer<'a> {
     }
 }
 
+/// Where the probe's images pass on the scan's path over lateral `x` and cranio-caudal
+/// `y` (patient frame, mm: [`ScanPath::over`]) of `patient`'s skin with the robot base at
+/// `base_t_patient`, placed every [`TRACK_STEP_MM`] as the controller places tracked poses
+/// ([`ImagedArea::place`]; robot base frame). Nothing is rendered and nothing is noisy:
+/// the lines a sweep of that band gives (`eval --robustness --imaged`).
+pub(crate) fn imaged(
+    cfg: &SweepConfig,
+    cal: &Calibration,
+    patient: &SubjectParams,
+    x: [f64; 2],
+    y: [f64; 2],
+    base_t_patient: &Isometry3<f64>,
+) -> ImagedArea<IMAGED_LINES> {
+    let skin = Skin::new(patient, cfg.skin_offset_mm);
+    let path = ScanPath::over(cfg, x, y);
+    let tcp_t_us = isometry(&cal.tcp_t_us);
+    let mut area = ImagedArea::new();
+    let steps = (path.total() / TRACK_STEP_MM).ceil() as usize;
+    for k in 0..=steps {
+        let [x, y] = path.at(k as f64 * TRACK_STEP_MM);
+        let b_t_us = base_t_patient * skin.tcp(x, y) * tcp_t_us;
+        area.place(&rigid(&b_t_us), &cal.probe);
+    }
+    area
+}
+
+/// The probe's step between two placed images in [`imaged`], mm: a 100 Hz tracker's at
+/// 50 mm/s, a quarter of [`ribreg_core::acquisition::imaged::STEP_MM`].
+const TRACK_STEP_MM: f64 = 0.5;
+
+/// An f64 isometry as a `Rigid` (f32).
+fn rigid(iso: &Isometry3<f64>) -> Rigid {
+    Rigid {
+        rotation: iso.rotation.to_rotation_matrix().matrix().cast(),
+        translation: iso.translation.vector.cast(),
+    }
+}
+
 /// The patient mesh's (x, y) extent, patient frame.
-fn extent(mesh: &Mesh) -> ([f64; 2], [f64; 2]) {
+pub(crate) fn extent(mesh: &Mesh) -> ([f64; 2], [f64; 2]) {
     let mut lo = [f64::INFINITY; 2];
     let mut hi = [f64::NEG_INFINITY; 2];
     for v in &mesh.0 {
@@ -358,12 +406,10 @@ pub(crate) fn scan(
 ) -> Scan {
     let skin = Skin::new(patient, cfg.skin_offset_mm);
     let (lo, hi) = extent(mesh);
-    let path = ScanPath::serpentine(
-        lo[0] - cfg.margin_mm,
-        hi[0] + cfg.margin_mm,
-        hi[1] + 0.5 * cfg.line_spacing_mm,
-        lo[1] - 0.5 * cfg.line_spacing_mm,
-        cfg.line_spacing_mm,
+    let path = ScanPath::over(
+        cfg,
+        [lo[0] - cfg.margin_mm, hi[0] + cfg.margin_mm],
+        [lo[1], hi[1]],
     );
     let duration = path.total() / cfg.speed_mm_s;
     let tcp_at = |t: f64| {
@@ -528,6 +574,28 @@ mod tests {
         for bad in [MIN_MARGIN_MM - 1.0, f64::NAN, f64::INFINITY] {
             let e = with(bad).validate().unwrap_err().to_string();
             assert!(e.contains("margin"), "{bad}: {e}");
+        }
+    }
+
+    /// The lines a band's images give are the path's: one per pass, each from one lateral
+    /// end to the other (its end images' centres within the beam's tilt of them).
+    #[test]
+    fn a_band_s_images_make_one_line_per_pass() {
+        let patient = SubjectParams::template();
+        let cfg = SweepConfig::default();
+        let cal = super::super::default_calibration();
+        let (x, y) = ([-90.0, 60.0], [-80.0, 40.0]);
+        let area = imaged(&cfg, &cal, &patient, x, y, &Isometry3::identity());
+        let passes = ScanPath::over(&cfg, x, y).corners.len() / 2;
+        assert_eq!(passes, 14);
+        assert_eq!((area.line_count(), area.dropped), (passes, 0));
+        for (k, [first, last]) in area.lines().enumerate() {
+            let ends = if k % 2 == 0 { x } else { [x[1], x[0]] };
+            let off = [
+                first.centre.x - ends[0] as f32,
+                last.centre.x - ends[1] as f32,
+            ];
+            assert!(off.iter().all(|d| d.abs() < 15.0), "line {k}: {off:?}");
         }
     }
 
