@@ -13,9 +13,11 @@ use crate::phantom::{
     HardPart, Part, PhantomConfig, PhantomPair, Preset, Variant, STERNUM_LABEL, WAYPOINT_PLAN,
 };
 use crate::plot::{self, Series};
-use crate::register::{register_clouds, to_core, to_file, Ablation, Method, Options};
+use crate::register::{check_edges, register_clouds, to_core, to_file, Ablation, Method, Options};
 use crate::stats::{paired_t_test, Summary};
+use ribreg_core::acquisition::imaged::ImagedArea;
 use ribreg_core::error::Cloud as Which;
+use ribreg_core::limits::IMAGED_LINES;
 use ribreg_core::registration::metrics::compare;
 use ribreg_core::Vec3;
 use serde_json::{json, Value};
@@ -67,6 +69,9 @@ impl EvalMethod {
     }
 }
 
+/// Where a sweep imaged, as the controller keeps it.
+type Imaged = ImagedArea<IMAGED_LINES>;
+
 /// What `eval` runs.
 #[derive(Clone, Debug)]
 pub struct EvalConfig {
@@ -84,6 +89,10 @@ pub struct EvalConfig {
     pub methods: Vec<EvalMethod>,
     /// Worker threads.
     pub jobs: usize,
+    /// Robustness sweep: each case's sweep comes with the lines its probe imaged, and
+    /// ours checks every rib end against them as `register --imaged` does
+    /// ([`robustness::probe_track`]).
+    pub imaged: bool,
 }
 
 impl EvalConfig {
@@ -183,22 +192,26 @@ fn variant_name(v: Variant) -> &'static str {
 type Mapped = (Vec<[f64; 3]>, Vec<[f64; 3]>, Vec<bool>, f64);
 
 /// Runs one method on one pair; `Err` carries the method's own error message.
-fn run_method(m: EvalMethod, pair: &PhantomPair) -> Result<Mapped, String> {
+fn run_method(
+    m: EvalMethod,
+    pair: &PhantomPair,
+    imaged: Option<&Imaged>,
+) -> Result<Mapped, String> {
     match m {
-        EvalMethod::Ours(method, labelled) => run_ours(pair, method.into(), labelled),
+        EvalMethod::Ours(method, labelled) => run_ours(pair, method.into(), labelled, imaged),
         EvalMethod::Without(a) => {
             let how = Options {
                 without: Some(a),
                 ..Method::Improved.into()
             };
-            run_ours(pair, how, true)
+            run_ours(pair, how, true, imaged)
         }
         EvalMethod::Partial => {
             let how = Options {
                 partial: true,
                 ..Method::Improved.into()
             };
-            run_ours(pair, how, true)
+            run_ours(pair, how, true, imaged)
         }
         EvalMethod::Baseline(b) => {
             let t0 = Instant::now();
@@ -211,8 +224,15 @@ fn run_method(m: EvalMethod, pair: &PhantomPair) -> Result<Mapped, String> {
     }
 }
 
-/// Ours on one pair, `how`, with the template's labels or without.
-fn run_ours(pair: &PhantomPair, how: Options, labelled: bool) -> Result<Mapped, String> {
+/// Ours on one pair, `how`, with the template's labels or without; with where the
+/// sweep imaged, every rib end the target shows is checked against it as `register
+/// --imaged` does ([`check_edges`]).
+fn run_ours(
+    pair: &PhantomPair,
+    how: Options,
+    labelled: bool,
+    imaged: Option<&Imaged>,
+) -> Result<Mapped, String> {
     let t0 = Instant::now();
     let tpl = to_core(&pair.template.points, Which::Template).map_err(|e| e.to_string())?;
     let tgt = to_core(&pair.target, Which::Target).map_err(|e| e.to_string())?;
@@ -221,10 +241,18 @@ fn run_ours(pair: &PhantomPair, how: Options, labelled: bool) -> Result<Mapped, 
     let labels = labelled.then_some(labels.as_slice());
     let o = register_clouds(&tpl, labels, &tgt, Some(&wps), how, &mut |_| ())
         .map_err(|e| e.to_string())?;
+    let cut = match imaged {
+        Some(area) => {
+            check_edges(&o.registration, &o.reach, area, how.partial)
+                .map_err(|e| e.to_string())?
+                .1
+        }
+        None => [false; 2],
+    };
     let ms = t0.elapsed().as_secs_f64() * 1e3;
     // Only a partial mapping marks waypoints; any other judges them all.
     let supported = match how.partial {
-        true => crate::register::supported(&o.reach, [false; 2]),
+        true => crate::register::supported(&o.reach, cut),
         false => vec![],
     };
     Ok((
@@ -235,7 +263,15 @@ fn run_ours(pair: &PhantomPair, how: Options, labelled: bool) -> Result<Mapped, 
     ))
 }
 
-fn evaluate(m: EvalMethod, pair: &PhantomPair, variant: Variant, seed: u64) -> CaseResult {
+/// `m` on `pair`, judged against its truth; `imaged`: where the sweep imaged, for
+/// [`run_ours`].
+fn evaluate(
+    m: EvalMethod,
+    pair: &PhantomPair,
+    variant: Variant,
+    seed: u64,
+    imaged: Option<&Imaged>,
+) -> CaseResult {
     let mut r = CaseResult {
         method: m.name(),
         preset: pair.config.preset.name().into(),
@@ -254,7 +290,7 @@ fn evaluate(m: EvalMethod, pair: &PhantomPair, variant: Variant, seed: u64) -> C
         waypoint_clearance: vec![],
         runtime_ms: f64::NAN,
     };
-    match run_method(m, pair) {
+    match run_method(m, pair, imaged) {
         Err(e) => r.error = Some(e),
         Ok((dense, wps, supported, ms)) => {
             let to32 = |p: &[[f64; 3]]| -> Vec<Vec3> {
@@ -433,7 +469,7 @@ pub fn run_eval(
         let pair = phantom(cfg, id);
         cfg.methods
             .iter()
-            .map(|&m| evaluate(m, &pair, id.1, id.2))
+            .map(|&m| evaluate(m, &pair, id.1, id.2, None))
             .collect()
     });
     results.sort_by(|a, b| {
@@ -738,7 +774,11 @@ fn figures(cfg: &EvalConfig, results: &[CaseResult], out: &Path) -> Result<(), C
     let mapped: Vec<(String, Vec<[f64; 3]>)> = cfg
         .methods
         .iter()
-        .filter_map(|&m| run_method(m, &pair).ok().map(|(_, w, ..)| (m.name(), w)))
+        .filter_map(|&m| {
+            run_method(m, &pair, None)
+                .ok()
+                .map(|(_, w, ..)| (m.name(), w))
+        })
         .collect();
     write_figures(out, &tpl, &tgt, &outcome, &pair.true_waypoints, &mapped)
 }
@@ -887,6 +927,7 @@ mod tests {
             variants: vec![Variant::Aligned],
             methods: vec![EvalMethod::Ours(Method::Improved, true)],
             jobs: 1,
+            imaged: false,
         };
         let dir = std::env::temp_dir().join(format!("ribreg-first-seed-{}", std::process::id()));
         let ids = prepare(&cfg, &dir).unwrap();
@@ -913,6 +954,7 @@ mod tests {
                 EvalMethod::Ours(Method::Paper, true),
             ],
             jobs: 1,
+            imaged: false,
         };
         let case = |m: EvalMethod, seed, error: Option<&str>| CaseResult {
             method: m.name(),

@@ -49,6 +49,12 @@ pub struct Args {
     /// accepted runs, refusals and silent failures (writes robustness.md and .json).
     #[arg(long)]
     robustness: bool,
+    /// With `--robustness`: give each case's sweep the lines its probe imaged (the
+    /// default sweep's, 20 mm past the cartilages, stopping where a case cuts a side
+    /// short), and check every rib end against them as `register --imaged` and the
+    /// controller do.
+    #[arg(long, requires = "robustness")]
+    imaged: bool,
     /// Output folder (created if missing).
     #[arg(long, default_value = "out/eval")]
     out_dir: PathBuf,
@@ -102,6 +108,7 @@ pub fn run(args: &Args, ctx: &Context) -> Result<(), CliError> {
         variants,
         methods,
         jobs,
+        imaged: args.imaged,
     };
     // Progress rewrites one line on a terminal.
     let (quiet, tty) = (ctx.quiet, std::io::stderr().is_terminal());

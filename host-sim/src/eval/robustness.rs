@@ -17,15 +17,21 @@
 //!   [`SHORT_SIDE_S`] of each side's outermost cartilage left out, as a band of probe
 //!   lines too narrow leaves it. The lateral waypoints are not reached: refused too.
 //!
+//! With `--imaged` ([`EvalConfig::imaged`]) each case's sweep also comes with the lines
+//! its probe imaged ([`probe_track`]), and ours checks every rib end against them, as
+//! `register --imaged` and the controller do: a cloud cut short is then a sweep whose
+//! lines stopped there.
+//!
 //! A hard phantom's own sweep holes can do the same to any case: a run whose sweep does
 //! not reach a waypoint ([`PhantomPair::unreached_waypoints`]) is counted apart
 //! ([`Coverage::Holes`]), neither among the complete sweeps, whose refusals are false
 //! alarms, nor among the cut ones.
 
-use super::{evaluate, parallel, phantom, prepare, variant_name, CaseResult, EvalConfig};
+use super::{evaluate, parallel, phantom, prepare, variant_name, CaseResult, EvalConfig, Imaged};
 use crate::error::CliError;
 use crate::io;
 use crate::phantom::{gaussian, Part, PhantomPair, Pose, Side};
+use crate::sweep::{self, SweepConfig};
 use ribreg_core::math::rng::Rng;
 use serde_json::json;
 use std::fmt::Write as _;
@@ -199,6 +205,16 @@ impl Case {
         out
     }
 
+    /// Whether the case cuts the sweep short laterally on `side`: that side missing or
+    /// stopping short, or both sides stopping short or at a line.
+    fn cuts(self, side: Side) -> bool {
+        match self {
+            Case::SideMissing(s) | Case::ShortSide(s) => s == side,
+            Case::Narrow | Case::Band => true,
+            _ => false,
+        }
+    }
+
     fn stream(self) -> u64 {
         match self {
             Case::Yaw(d) => 1 + u64::from(d),
@@ -213,6 +229,43 @@ impl Case {
             Case::Band => 2007,
         }
     }
+}
+
+/// The lines a probe imaged to give `moved`, [`Case::apply`] of `case` to a pair whose
+/// patient's chest spans `chest` ([`sweep::chest_extent`]): the default sweep's
+/// serpentine lines ([`sweep::imaged_band`]) over the chest's cranio-caudal extent.
+/// Laterally they run [`SweepConfig::margin_mm`] past the chest on a side the case
+/// leaves whole (the protocol: scan 20 mm past the cartilages' ends), but only as far as
+/// the outermost cartilage or sternum point it keeps on a side it cuts (that side
+/// missing or stopping short, or both sides stopping short or at a line: a band of
+/// lines too narrow). In the target's frame, turned and moved with it. The chest's
+/// extent is widened to every point the case keeps, outliers too: what a probe's images
+/// show lies where they passed (the phantom draws outliers in a box around the cloud).
+/// Rib 5 missing keeps the chest's whole height (a cut of the cloud, as the case is;
+/// the coverage check refuses it).
+pub fn probe_track(case: Case, moved: &PhantomPair, chest: [[f64; 2]; 2]) -> Imaged {
+    let margin = SweepConfig::default().margin_mm;
+    let back = moved.pose.inverse();
+    let patient: Vec<[f64; 3]> = moved.target.iter().map(|p| back.apply(*p)).collect();
+    let [mut lo, mut hi] = chest;
+    for p in &patient {
+        for a in 0..2 {
+            lo[a] = lo[a].min(p[a]);
+            hi[a] = hi[a].max(p[a]);
+        }
+    }
+    // Lateral ends: the patient's right (−x), then left.
+    let mut x = [lo[0] - margin, hi[0] + margin];
+    for (end, side) in [(0, Side::Right), (1, Side::Left)] {
+        if case.cuts(side) {
+            let outermost = (patient.iter().zip(&moved.target_material))
+                .filter(|(_, m)| m.is_some())
+                .map(|(p, _)| side.sign() * p[0])
+                .fold(0.0, f64::max);
+            x[end] = side.sign() * outermost;
+        }
+    }
+    sweep::imaged_band(&moved.patient_params, x, [lo[1], hi[1]], &moved.pose)
 }
 
 /// Rotation by `angle` about `axis` through the centroid of `points`, then a move of
@@ -351,13 +404,17 @@ pub fn run_robustness(
     let mut results = parallel(&cases, cfg.jobs, &what, progress, |id| {
         let pair = phantom(cfg, id);
         let (_, variant, seed) = *id;
+        let chest = cfg
+            .imaged
+            .then(|| sweep::chest_extent(&pair.patient_params));
         let mut rows = vec![];
         for case in Case::all() {
             let moved = case.apply(&pair, seed);
             let unreached = moved.unreached_waypoints();
             let coverage = Coverage::of(case, &unreached);
+            let track = chest.map(|c| probe_track(case, &moved, c));
             for &m in &cfg.methods {
-                let result = evaluate(m, &moved, variant, seed);
+                let result = evaluate(m, &moved, variant, seed, track.as_ref());
                 let (outcome, waypoint_max) = outcome(&result);
                 let unsupported = (result.waypoint_supported.iter().enumerate())
                     .filter(|(_, &s)| !s)
@@ -391,7 +448,7 @@ pub fn run_robustness(
     let table = markdown(cfg, &results);
     io::write_text(&out.join("robustness.md"), &table)?;
     let json = json!({ "pairs": cfg.pairs, "first_seed": cfg.first_seed, "silent_failure_mm": SILENT_FAILURE_MM,
-        "move_mm": MOVE_MM, "cases": results });
+        "move_mm": MOVE_MM, "imaged": cfg.imaged, "cases": results });
     let text = serde_json::to_string_pretty(&json)
         .map_err(|e| CliError::Output(format!("robustness results: {e}")))?;
     io::write_text(&out.join("robustness.json"), &text)?;
@@ -512,6 +569,15 @@ fn markdown(cfg: &EvalConfig, results: &[RobustResult]) -> String {
         cfg.seed_range(),
         variants.join(" and ")
     );
+    if cfg.imaged {
+        let _ = writeln!(
+            s,
+            "Each case's sweep comes with the lines its probe imaged (`--imaged`): 20 mm past \
+             the chest on a side the case leaves whole, as far as its outermost point on a \
+             side it cuts; ours refuses a rib end the probe did not image past, as \
+             `register --imaged` and the controller do.\n"
+        );
+    }
     let methods: Vec<String> = cfg.methods.iter().map(|m| m.name()).collect();
     for preset in &cfg.presets {
         let of = |r: &&RobustResult| r.result.preset == preset.name();
@@ -584,6 +650,44 @@ mod tests {
         let before = along(pair.target[0], pair.target[100]);
         let after = along(yaw.target[0], yaw.target[100]);
         assert!((before - after).abs() < 1e-9);
+    }
+
+    /// With the lines its probe imaged, a sweep cut short is refused at the sweep's edge
+    /// and a whole one turned is accepted. Each cut one here was a silent failure
+    /// without them (`eval --robustness`, 23.5, 28.4 and 24.9 mm off).
+    #[test]
+    fn a_sweep_cut_short_is_refused_by_its_probe_track() {
+        use crate::eval::EvalMethod;
+        use crate::phantom::{Preset, Variant};
+        use crate::register::Method;
+        let ours = EvalMethod::Ours(Method::Improved, true);
+        for (seed, preset, cut) in [
+            (9, Preset::Standard, Case::ShortSide(Side::Left)),
+            (199, Preset::Hard, Case::Band),
+            (126, Preset::Standard, Case::Band),
+        ] {
+            let pair = PhantomPair::generate(&PhantomConfig {
+                seed,
+                preset,
+                ..PhantomConfig::default()
+            });
+            let chest = sweep::chest_extent(&pair.patient_params);
+            for case in [cut, Case::Yaw(90)] {
+                let moved = case.apply(&pair, seed);
+                let track = probe_track(case, &moved, chest);
+                let with = evaluate(ours, &moved, Variant::Aligned, seed, Some(&track));
+                let without = evaluate(ours, &moved, Variant::Aligned, seed, None);
+                let what = format!("{seed} {case:?}: {:?}", with.error);
+                if case == cut {
+                    assert_eq!(outcome(&without).0, "silent failure", "{what}");
+                    let e = with.error.unwrap_or_default();
+                    assert!(e.contains("edge of the sweep"), "{seed} {case:?}: {e}");
+                } else {
+                    assert_eq!(outcome(&with).0, "accepted", "{what}");
+                    assert_eq!(with.waypoint_errors, without.waypoint_errors, "{what}");
+                }
+            }
+        }
     }
 
     #[test]
