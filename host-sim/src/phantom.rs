@@ -517,6 +517,14 @@ pub struct PhantomPair {
     pub defects: Option<SweepDefects>,
 }
 
+/// The mean of `points` (the origin for none).
+pub fn centroid(points: &[[f64; 3]]) -> [f64; 3] {
+    let n = points.len().max(1) as f64;
+    points.iter().fold([0.0; 3], |a, p| {
+        [a[0] + p[0] / n, a[1] + p[1] / n, a[2] + p[2] / n]
+    })
+}
+
 impl PhantomPair {
     /// The pair for `cfg`: template = [`SubjectParams::template`], patient =
     /// [`SubjectParams::random_for`] its preset with a seed derived from `cfg.seed`.
@@ -743,6 +751,29 @@ impl PhantomPair {
             })
             .map(|(i, _)| i)
             .collect()
+    }
+
+    /// The same pair with its target frame moved by `by` (the old target frame into the
+    /// new): the target's points, the pose and the true waypoints move together; the
+    /// template and its plan stay.
+    pub fn moved(mut self, by: &Pose) -> PhantomPair {
+        for p in self.target.iter_mut().chain(&mut self.true_waypoints) {
+            *p = by.apply(*p);
+        }
+        self.pose = by.compose(&self.pose);
+        self
+    }
+
+    /// The same pair with the robot base turned by `deg` degrees about the patient's
+    /// anterior axis through the target's centroid ([`PhantomPair::moved`]): where the
+    /// robot stands against the bed (at 180° it stands at the other end).
+    pub fn turned(self, deg: f64) -> PhantomPair {
+        if deg == 0.0 {
+            return self;
+        }
+        let anterior = self.pose.apply_vector([0.0, 0.0, 1.0]);
+        let turn = Pose::about(anterior, deg.to_radians(), centroid(&self.target));
+        self.moved(&turn)
     }
 
     /// Number of outliers in the target.

@@ -30,7 +30,7 @@
 use super::{evaluate, parallel, phantom, prepare, variant_name, CaseResult, EvalConfig, Imaged};
 use crate::error::CliError;
 use crate::io;
-use crate::phantom::{gaussian, Part, PhantomPair, Pose, Side};
+use crate::phantom::{centroid, gaussian, Part, PhantomPair, Pose, Side};
 use crate::sweep::{self, SweepConfig};
 use ribreg_core::math::rng::Rng;
 use serde_json::json;
@@ -194,15 +194,9 @@ impl Case {
             _ => Pose::identity(),
         };
         let mut out = pair.clone();
-        out.target = target.iter().map(|&p| moved.apply(p)).collect();
+        out.target = target;
         out.target_material = target_material;
-        out.pose = moved.compose(&pair.pose);
-        out.true_waypoints = pair
-            .true_waypoints
-            .iter()
-            .map(|&p| moved.apply(p))
-            .collect();
-        out
+        out.moved(&moved)
     }
 
     /// Whether the case cuts the sweep short laterally on `side`: that side missing or
@@ -271,16 +265,10 @@ pub fn probe_track(case: Case, moved: &PhantomPair, chest: [[f64; 2]; 2]) -> Ima
 /// Rotation by `angle` about `axis` through the centroid of `points`, then a move of
 /// [`MOVE_MM`] in a random direction.
 fn about_centroid(points: &[[f64; 3]], axis: [f64; 3], angle: f64, rng: &mut Rng) -> Pose {
-    let n = points.len().max(1) as f64;
-    let c = points.iter().fold([0.0; 3], |a, p| {
-        [a[0] + p[0] / n, a[1] + p[1] / n, a[2] + p[2] / n]
-    });
-    let turn = Pose::from_axis_angle(axis, angle, [0.0; 3]);
+    let turn = Pose::about(axis, angle, centroid(points));
     let (dir, _) = random_rotation(rng);
-    let rc = turn.apply(c);
-    let translation = [0, 1, 2].map(|i| c[i] - rc[i] + MOVE_MM * dir[i]);
     Pose {
-        translation,
+        translation: [0, 1, 2].map(|i| turn.translation[i] + MOVE_MM * dir[i]),
         ..turn
     }
 }

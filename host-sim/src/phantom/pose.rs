@@ -54,6 +54,16 @@ impl Pose {
         }
     }
 
+    /// Rotation by `angle_rad` about the unit `axis` through the point `centre`.
+    pub fn about(axis: [f64; 3], angle_rad: f64, centre: [f64; 3]) -> Self {
+        let turn = Self::from_axis_angle(axis, angle_rad, [0.0; 3]);
+        let rc = turn.apply(centre);
+        Self {
+            translation: [0, 1, 2].map(|i| centre[i] - rc[i]),
+            ..turn
+        }
+    }
+
     /// `R v` (a direction: no translation).
     pub fn apply_vector(&self, v: [f64; 3]) -> [f64; 3] {
         let r = &self.rotation;

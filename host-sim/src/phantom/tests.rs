@@ -705,3 +705,28 @@ fn hard_part_names_are_the_command_line_names() {
         assert_eq!(v.get_name(), p.name());
     }
 }
+
+/// A robot base turned about the patient's anterior axis turns the target and its truth
+/// together: the anterior axis and every distance stay, the patient frame maps to the
+/// same points, and a turn of 0 changes nothing.
+#[test]
+fn a_turned_base_turns_the_target_and_its_truth_together() {
+    let pair = default_pair().clone();
+    assert_eq!(pair.clone().turned(0.0), pair);
+    let turned = pair.clone().turned(180.0);
+    let d = |a: [f64; 3], b: [f64; 3]| (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt();
+    let (w, t) = (pair.true_waypoints[3], turned.true_waypoints[3]);
+    assert!((d(pair.target[9], w) - d(turned.target[9], t)).abs() < 1e-9);
+    // Half a turn: the waypoint moved by about twice its distance from the axis.
+    assert!(d(w, t) > 20.0, "{}", d(w, t));
+    let up = |p: &PhantomPair| p.pose.apply_vector([0.0, 0.0, 1.0]);
+    let (a, b) = (up(&pair), up(&turned));
+    assert!((0..3).all(|i| (a[i] - b[i]).abs() < 1e-12), "{a:?} {b:?}");
+    // The same patient point lands on the turned target point.
+    let back = |p: &PhantomPair, q: [f64; 3]| p.pose.inverse().apply(q);
+    let (p0, p1) = (back(&pair, pair.target[9]), back(&turned, turned.target[9]));
+    assert!(d(p0, p1) < 1e-9, "{p0:?} {p1:?}");
+    // The turn is about the target's centroid: it stays.
+    let (c0, c1) = (centroid(&pair.target), centroid(&turned.target));
+    assert!(d(c0, c1) < 1e-9);
+}
