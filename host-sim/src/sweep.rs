@@ -110,6 +110,12 @@ pub struct SweepConfig {
     pub calibration_amplitude_mm: f64,
     /// Landmark row noise of the calibration sweep (SD), pixels.
     pub calibration_noise_px: f64,
+    /// Where the robot stands: its base turned by this many degrees about the patient's
+    /// anterior axis (through the chest), from where the phantom's pose variant places
+    /// it (`hil --base-yaw`): beside the bed at 90°, at its other end at 180°. The sweep
+    /// covers the same chest; only the frame it arrives in turns.
+    #[serde(default)]
+    pub base_yaw_deg: f64,
 }
 
 impl Default for SweepConfig {
@@ -130,6 +136,7 @@ impl Default for SweepConfig {
             calibration_duration_s: 20.0,
             calibration_amplitude_mm: 10.0,
             calibration_noise_px: 0.5,
+            base_yaw_deg: 0.0,
         }
     }
 }
@@ -170,6 +177,9 @@ impl SweepConfig {
             self.calibration_noise_px,
             self.calibration_amplitude_mm,
         ];
+        if !(self.base_yaw_deg.is_finite() && self.base_yaw_deg.abs() <= 360.0) {
+            return bad("the robot base's yaw must be within ±360°");
+        }
         if !noises.into_iter().all(nonneg) || !pos(self.calibration_duration_s) {
             return bad("offsets, noises and amplitudes must be non-negative");
         }
@@ -669,7 +679,7 @@ pub fn simulate(phantom: &PhantomConfig, cfg: &SweepConfig) -> Result<SweepLogs,
         hard_without,
         ..phantom.clone()
     };
-    let pair = PhantomPair::generate(&ideal);
+    let pair = PhantomPair::generate(&ideal).turned(cfg.base_yaw_deg);
     let calibration = default_calibration();
     let mesh = SubjectGeometry::new(&pair.patient_params).mesh(MESH_EDGE_MM);
     let base_t_patient = sim::pose_isometry(&pair.pose);

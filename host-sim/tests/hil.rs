@@ -193,6 +193,46 @@ fn the_configured_orientation_prior_is_used_and_a_wrong_one_refused() {
     );
 }
 
+/// A robot standing beside the bed or at its other end (`ribreg hil --base-yaw 90` or
+/// `180`: its base turned about the patient's anterior axis): the sweep arrives turned,
+/// and the controller, given no orientation prior, drives the probe to every waypoint
+/// within the tolerance, as close to the truth on average as the unturned run (within
+/// 1 mm; the compounding grid is the robot base's, so the cloud differs a little).
+#[test]
+fn a_robot_standing_anywhere_around_the_bed_drives_to_every_waypoint() {
+    let at = |base_yaw_deg| {
+        let mut options = RunOptions::quick();
+        options.sweep.base_yaw_deg = base_yaw_deg;
+        hil::run_with(
+            &mut Session::new(InProcess::new()),
+            &PhantomConfig::default(),
+            options,
+            &mut |_| {},
+        )
+        .unwrap()
+    };
+    let unturned = at(0.0);
+    for yaw in [90.0, 180.0] {
+        let r = at(yaw);
+        consistent(&r);
+        assert_eq!(r.driven().count(), unturned.waypoints.len(), "{yaw}°");
+        assert!(r.max_error() < 5.0, "{yaw}°: {} mm", r.max_error());
+        let mean = |r: &HilReport| {
+            let e: Vec<f64> = r.driven().map(|w| w.error_mm).collect();
+            e.iter().sum::<f64>() / e.len() as f64
+        };
+        let (m, m0) = (mean(&r), mean(&unturned));
+        assert!(
+            (m - m0).abs() < 1.0,
+            "{yaw}°: mean {m} mm, unturned {m0} mm"
+        );
+        // The waypoints were driven to in the turned frame: far from the unturned ones.
+        let [a, b] = [&r, &unturned].map(|r| r.waypoints[0].mapped);
+        let moved = (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f32>().sqrt();
+        assert!(moved > 20.0, "{yaw}°: {moved} mm");
+    }
+}
+
 /// A planned waypoint the sweep cannot reach (20 mm beyond the lateral ends of
 /// cartilages 3 and 4 on the left): the controller refuses the plan by default (fault
 /// code 24), and in a partial plan maps it, marks it and every waypoint on its side, and

@@ -560,7 +560,8 @@ mod tests {
     }
 
     /// A negative margin stops the lines inside the cartilages' extent, down to
-    /// [`crate::sweep::MIN_MARGIN_MM`]; below it, or not finite, the settings are refused.
+    /// [`crate::sweep::MIN_MARGIN_MM`]; below it, or not finite, the settings are refused,
+    /// and so is a robot base's yaw that is not a number within a turn.
     #[test]
     fn the_margin_may_stop_the_lines_short_within_bounds() {
         use crate::sweep::{SweepConfig, MIN_MARGIN_MM};
@@ -574,6 +575,18 @@ mod tests {
         for bad in [MIN_MARGIN_MM - 1.0, f64::NAN, f64::INFINITY] {
             let e = with(bad).validate().unwrap_err().to_string();
             assert!(e.contains("margin"), "{bad}: {e}");
+        }
+        // The robot base's yaw likewise: any turn, but a number.
+        let yaw = |base_yaw_deg| SweepConfig {
+            base_yaw_deg,
+            ..SweepConfig::default()
+        };
+        for ok in [0.0, -90.0, 180.0, 360.0] {
+            assert!(yaw(ok).validate().is_ok(), "{ok}");
+        }
+        for bad in [361.0, f64::NAN, f64::NEG_INFINITY] {
+            let e = yaw(bad).validate().unwrap_err().to_string();
+            assert!(e.contains("yaw"), "{bad}: {e}");
         }
     }
 
