@@ -35,6 +35,9 @@ use crate::Vec3;
 pub struct Som<const CAP: usize> {
     rows: usize,
     cols: usize,
+    /// The coordinate (0 x, 1 y, 2 z) along which the map spreads most, where the
+    /// one-pass scan looks first ([`Som::bmu`]).
+    lead: usize,
     x: [f32; CAP],
     y: [f32; CAP],
     z: [f32; CAP],
@@ -86,9 +89,26 @@ impl<const CAP: usize> Som<CAP> {
         }
         let e1 = frame.axes.column(0) * (2.0 * frame.spread[0]);
         let e2 = frame.axes.column(1) * (2.0 * frame.spread[1]);
+        // Each coordinate's variance over the cloud, from its principal axes.
+        let variance = |k: usize| {
+            (0..3)
+                .map(|a| {
+                    let v = frame.axes[(k, a)] * frame.spread[a];
+                    v * v
+                })
+                .sum::<f32>()
+        };
+        let lead = (1..3).fold(0, |best, k| {
+            if variance(k) > variance(best) {
+                k
+            } else {
+                best
+            }
+        });
         let mut som = Som {
             rows,
             cols,
+            lead,
             x: [0.0; CAP],
             y: [0.0; CAP],
             z: [0.0; CAP],
@@ -127,7 +147,11 @@ impl<const CAP: usize> Som<CAP> {
     /// more instructions for the whole registration).
     pub fn bmu(&self, p: &Vec3) -> (usize, usize) {
         let best = if cfg!(target_arch = "arm") {
-            self.nearest_by_one_pass(p)
+            match self.lead {
+                0 => self.nearest_by_one_pass::<0>(p),
+                1 => self.nearest_by_one_pass::<1>(p),
+                _ => self.nearest_by_one_pass::<2>(p),
+            }
         } else {
             self.nearest_by_passes(p)
         };
@@ -135,30 +159,41 @@ impl<const CAP: usize> Som<CAP> {
     }
 
     /// [`Som::bmu`]'s node in one pass with one running minimum, a node left as soon as
-    /// a partial sum of its distance reaches the best: `dx²`, then `dx² + dy²`, are the
-    /// first terms of the full sum, which rounding never makes smaller than them, so a
-    /// node skipped could not have been strictly nearer (the first of equal distances
-    /// wins). Most nodes of a map lie far from a sample along x alone: the controller's
-    /// registration took 140.9 M instructions with this exit, 147.2 M without (the same
-    /// exit ran 4 % slower on x86, its branches mispredicted, hence the passes there).
-    fn nearest_by_one_pass(&self, p: &Vec3) -> usize {
+    /// a partial sum of its distance reaches the best: first the square of coordinate
+    /// `LEAD` alone, then `dx² + dy²` (unless `LEAD` is z, whose square comes last).
+    /// Each is a term or the first terms of the full sum `(dx² + dy²) + dz²`, which
+    /// rounding never makes smaller than them, so a node skipped could not have been
+    /// strictly nearer (the first of equal distances wins). Most nodes of a map lie far
+    /// from a sample along its longest coordinate alone: the controller's registration
+    /// took 140.9 M instructions with the exit on x, 147.2 M without (the same exit ran
+    /// 4 % slower on x86, its branches mispredicted, hence the passes there). The lead
+    /// is the coordinate along which the map spreads most ([`Som::linear_init`]): with x
+    /// always first, a robot base turned by 270° against the patient cost 153.0 M, over
+    /// the 150 M budget; with the lead, 149.8 M (README, "The robot base anywhere around
+    /// the bed").
+    fn nearest_by_one_pass<const LEAD: usize>(&self, p: &Vec3) -> usize {
         let n = self.len();
         let (xs, ys, zs) = (&self.x[..n], &self.y[..n], &self.z[..n]);
         let (mut best_d, mut best) = (f32::INFINITY, 0usize);
         for (k, ((&x, &y), &z)) in xs.iter().zip(ys).zip(zs).enumerate() {
             // The terms as `distance_sq` adds them, from the left.
-            let dx = x - p.x;
-            let sx = dx * dx;
-            if sx >= best_d {
+            let square = |a: f32, b: f32| (a - b) * (a - b);
+            let lead = match LEAD {
+                0 => square(x, p.x),
+                1 => square(y, p.y),
+                _ => square(z, p.z),
+            };
+            if lead >= best_d {
                 continue;
             }
-            let dy = y - p.y;
-            let sxy = sx + dy * dy;
-            if sxy >= best_d {
+            let sx = if LEAD == 0 { lead } else { square(x, p.x) };
+            let sy = if LEAD == 1 { lead } else { square(y, p.y) };
+            let sxy = sx + sy;
+            if LEAD != 2 && sxy >= best_d {
                 continue;
             }
-            let dz = z - p.z;
-            let d = sxy + dz * dz;
+            let sz = if LEAD == 2 { lead } else { square(z, p.z) };
+            let d = sxy + sz;
             if d < best_d {
                 (best_d, best) = (d, k);
             }
@@ -394,6 +429,7 @@ mod tests {
             let mut som = Som::<64> {
                 rows,
                 cols,
+                lead: 0,
                 x: [0.0; 64],
                 y: [0.0; 64],
                 z: [0.0; 64],
@@ -412,7 +448,9 @@ mod tests {
                     }
                 }
                 assert_eq!(som.bmu(&p), (best.1 / cols, best.1 % cols));
-                assert_eq!(som.nearest_by_one_pass(&p), best.1);
+                assert_eq!(som.nearest_by_one_pass::<0>(&p), best.1);
+                assert_eq!(som.nearest_by_one_pass::<1>(&p), best.1);
+                assert_eq!(som.nearest_by_one_pass::<2>(&p), best.1);
                 assert_eq!(som.nearest_by_passes(&p), best.1);
             }
             // Both signs of NaN (x86's default NaN has the sign bit set).
@@ -420,7 +458,8 @@ mod tests {
                 Vec3::new(f32::NAN, 0.0, 0.0),
                 Vec3::new(-f32::NAN, 0.0, 0.0),
             ] {
-                assert_eq!(som.nearest_by_one_pass(&nan), 0);
+                assert_eq!(som.nearest_by_one_pass::<0>(&nan), 0);
+                assert_eq!(som.nearest_by_one_pass::<2>(&nan), 0);
                 assert_eq!(som.nearest_by_passes(&nan), 0);
             }
             // One node's distance a NaN made by the FPU (∞ − ∞), the others' ∞: no node
@@ -428,7 +467,8 @@ mod tests {
             let mut far = som.clone();
             far.x[5] = f32::INFINITY;
             let inf = Vec3::new(f32::INFINITY, 0.0, 0.0);
-            assert_eq!(far.nearest_by_one_pass(&inf), 0);
+            assert_eq!(far.nearest_by_one_pass::<0>(&inf), 0);
+            assert_eq!(far.nearest_by_one_pass::<1>(&inf), 0);
             assert_eq!(far.nearest_by_passes(&inf), 0);
         }
     }
