@@ -91,6 +91,21 @@ impl Cli {
     }
 }
 
+/// Where the simulated robot stands (`phantom sweep`, `hil`).
+#[derive(clap::Args)]
+pub struct RobotArgs {
+    /// Where the robot stands: its base turned by this many degrees about the patient's
+    /// anterior axis (90: beside the bed, 180: at its other end). Nothing tells the
+    /// registration where it stands.
+    #[arg(
+        long,
+        value_name = "DEG",
+        default_value_t = 0.0,
+        allow_negative_numbers = true
+    )]
+    pub base_yaw: f64,
+}
+
 /// The phantom a subcommand builds (`phantom`, `phantom sweep`, `demo`, `hil`).
 #[derive(clap::Args)]
 pub struct PhantomArgs {

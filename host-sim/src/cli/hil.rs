@@ -2,7 +2,7 @@
 //! device or TCP port, or (default) the firmware under QEMU, then compared in-process
 //! and held to its instruction and stack budgets.
 
-use super::{Context, PhantomArgs};
+use super::{Context, PhantomArgs, RobotArgs};
 use ribreg_sim::error::CliError;
 use ribreg_sim::hil::emulator::Board;
 use ribreg_sim::hil::{
@@ -46,16 +46,8 @@ pub struct Args {
     /// band too narrow, which the controller should refuse (down to -60).
     #[arg(long, value_name = "MM", allow_negative_numbers = true)]
     sweep_margin_mm: Option<f64>,
-    /// Where the robot stands: its base turned by this many degrees about the patient's
-    /// anterior axis (90: beside the bed, 180: at its other end). The controller is
-    /// given no orientation prior.
-    #[arg(
-        long,
-        value_name = "DEG",
-        default_value_t = 0.0,
-        allow_negative_numbers = true
-    )]
-    base_yaw: f64,
+    #[command(flatten)]
+    robot: RobotArgs,
     /// The emulated board: `mps2-an386` (QEMU's MPS2, the default) or `f405` (the
     /// STM32F405 under QEMU's netduinoplus2).
     #[arg(long, default_value = "mps2-an386", value_parser = parse_board, conflicts_with_all = ["in_process", "port"])]
@@ -82,7 +74,7 @@ pub fn run(args: &Args, ctx: &Context) -> Result<(), CliError> {
     if let Some(margin) = args.sweep_margin_mm {
         options.sweep.margin_mm = margin;
     }
-    options.sweep.base_yaw_deg = args.base_yaw;
+    options.sweep.base_yaw_deg = args.robot.base_yaw;
     let faults = args.faults.then_some((Faults::DEFAULT, args.fault_seed));
     let phantom = &args.phantom.config();
     let progress = &mut |l: &str| ctx.progress(l);

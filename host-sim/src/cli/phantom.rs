@@ -1,7 +1,7 @@
 //! `ribreg phantom`: a phantom pair with its ground truth; `ribreg phantom sweep`: the
 //! logs of a simulated robotic sweep over it.
 
-use super::{Context, PhantomArgs};
+use super::{Context, PhantomArgs, RobotArgs};
 use ribreg_sim::demo;
 use ribreg_sim::error::CliError;
 use ribreg_sim::phantom::{PhantomConfig, PhantomPair};
@@ -62,15 +62,8 @@ struct SweepArgs {
     /// band too narrow; down to -60).
     #[arg(long, default_value_t = 20.0, allow_negative_numbers = true)]
     margin_mm: f64,
-    /// Where the robot stands: its base turned by this many degrees about the patient's
-    /// anterior axis (90: beside the bed, 180: at its other end).
-    #[arg(
-        long,
-        value_name = "DEG",
-        default_value_t = 0.0,
-        allow_negative_numbers = true
-    )]
-    base_yaw: f64,
+    #[command(flatten)]
+    robot: RobotArgs,
 }
 
 impl SweepArgs {
@@ -82,7 +75,7 @@ impl SweepArgs {
             pixel_noise_px: self.pixel_noise_px,
             frame_miss_rate: self.miss_rate,
             margin_mm: self.margin_mm,
-            base_yaw_deg: self.base_yaw,
+            base_yaw_deg: self.robot.base_yaw,
             ..SweepConfig::default()
         }
     }
